@@ -1,0 +1,94 @@
+//! Built-in demonstration volumes, computed (with `libm`) rather than stored.
+//!
+//! - [`Demo::Hydrogen`]: the paper's Figure 1, the probability density
+//!   |psi|^2 of the hydrogen 3d_xy orbital, proportional to
+//!   x^2 y^2 exp(-2r/3) in Bohr radii, sampled on [-20, 20]^3 and scaled so its
+//!   maximum (at r = 6 on the diagonals of the x-y plane) is 1.
+//! - [`Demo::Gyroid`]: sin x cos y + sin y cos z + sin z cos x sampled at
+//!   t_i = 8 pi i / (N - 1) on each axis (four periods).
+
+use crate::grid::GridError;
+
+/// A built-in volume.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Demo {
+    /// Hydrogen 3d_xy orbital, wavefunction squared (the paper's Figure 1).
+    Hydrogen,
+    /// Gyroid minimal surface, four periods per axis.
+    Gyroid,
+}
+
+/// Half the side of the hydrogen demo's cube, in Bohr radii.
+pub const HYDROGEN_EXTENT: f32 = 20.0;
+
+impl Demo {
+    /// Both demos.
+    pub const ALL: [Demo; 2] = [Demo::Hydrogen, Demo::Gyroid];
+
+    /// The demo's name on the command line.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Demo::Hydrogen => "hydrogen",
+            Demo::Gyroid => "gyroid",
+        }
+    }
+
+    /// The demo with this name.
+    pub fn from_name(name: &str) -> Option<Demo> {
+        Demo::ALL.into_iter().find(|d| d.name() == name)
+    }
+
+    /// A level that shows the demo's characteristic surface: the four lobes
+    /// of the orbital, or the gyroid's zero set.
+    pub const fn default_level(self) -> f32 {
+        match self {
+            Demo::Hydrogen => 0.1,
+            Demo::Gyroid => 0.0,
+        }
+    }
+
+    /// The sample at voxel `(i, j, k)` of an `n`^3 volume.
+    pub fn sample(self, n: usize, i: usize, j: usize, k: usize) -> f32 {
+        let step = if n > 1 { 1.0 / (n - 1) as f32 } else { 0.0 };
+        let (fi, fj, fk) = (i as f32 * step, j as f32 * step, k as f32 * step);
+        match self {
+            Demo::Hydrogen => {
+                let s = |f: f32| HYDROGEN_EXTENT * (2.0 * f - 1.0);
+                let (x, y, z) = (s(fi), s(fj), s(fk));
+                let r = libm::sqrtf(x * x + y * y + z * z);
+                // Maximum of x^2 y^2 exp(-2r/3): 324 exp(-4) at x = y = 3 sqrt 2.
+                const PEAK: f32 = 5.934_64;
+                x * x * y * y * libm::expf(-2.0 * r / 3.0) / PEAK
+            }
+            Demo::Gyroid => {
+                let t = 8.0 * core::f32::consts::PI;
+                let (x, y, z) = (t * fi, t * fj, t * fk);
+                let (sx, cx) = (libm::sinf(x), libm::cosf(x));
+                let (sy, cy) = (libm::sinf(y), libm::cosf(y));
+                let (sz, cz) = (libm::sinf(z), libm::cosf(z));
+                sx * cy + sy * cz + sz * cx
+            }
+        }
+    }
+
+    /// Fill `out` (x fastest) with the `n`^3 demo volume.
+    ///
+    /// # Errors
+    /// [`GridError::SizeMismatch`] unless `out.len() == n^3`,
+    /// [`GridError::Empty`] for `n == 0`.
+    pub fn fill(self, n: usize, out: &mut [f32]) -> Result<(), GridError> {
+        if n == 0 {
+            return Err(GridError::Empty);
+        }
+        let expected = n.checked_mul(n).and_then(|a| a.checked_mul(n)).ok_or(GridError::Overflow)?;
+        if out.len() != expected {
+            return Err(GridError::SizeMismatch { expected, actual: out.len() });
+        }
+        for (idx, v) in out.iter_mut().enumerate() {
+            let (i, j, k) = (idx % n, idx / n % n, idx / (n * n));
+            *v = self.sample(n, i, j, k);
+        }
+        Ok(())
+    }
+}

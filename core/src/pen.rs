@@ -1,0 +1,162 @@
+//! The pen: turns the traversal's drawing instructions into clean commands.
+//!
+//! The traversal of one subgrid emits SETPOINT/DRAWTO instructions at
+//! symbolic [`Crossing`]s. The pen places them in grid coordinates and tidies
+//! what a display should not see twice: a DRAWTO to where the pen already is
+//! (duplicated tree nodes reach the same crossing more than once) is dropped,
+//! a SETPOINT that no DRAWTO follows becomes a DRAWPOINT, and such a point is
+//! dropped when a line of the same subgrid already passes through it, or when
+//! it was already drawn.
+
+use crate::command::Command;
+use crate::subgrid::{Edge, Node, Subgrid};
+use crate::trace::{Conn, Crossing};
+
+/// Index of a crossing in a 13-bit mask: nodes 0..5, edges 5..13.
+#[inline(always)]
+fn bit(x: Crossing) -> u16 {
+    match x {
+        Crossing::Node(n) => 1 << n.index(),
+        Crossing::Edge(e) => 1 << (5 + e.index()),
+    }
+}
+
+/// Index of the segment between two distinct crossings in a 78-bit mask.
+#[inline(always)]
+fn pair_bit(a: Crossing, b: Crossing) -> u128 {
+    let (a, b) = (bit(a).trailing_zeros(), bit(b).trailing_zeros());
+    let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+    1u128 << (hi * (hi - 1) / 2 + lo)
+}
+
+#[inline(always)]
+fn from_bit(i: u32) -> Crossing {
+    if i < 5 {
+        Crossing::Node(Node::from_index(i as usize).unwrap_or(Node::C))
+    } else {
+        Crossing::Edge(Edge::from_index(i as usize - 5).unwrap_or(Edge::B0))
+    }
+}
+
+/// Where a subgrid sits in its grid, to place crossings in grid coordinates.
+///
+/// Coordinates are formed as `i + t` (or `j + t`) along each edge's canonical
+/// direction, so the two subgrids sharing an edge produce bit-identical
+/// crossings on it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Placement {
+    x0: f32,
+    x1: f32,
+    y0: f32,
+    y1: f32,
+}
+
+impl Placement {
+    /// The placement of the subgrid whose lower-left corner is grid point
+    /// `(i, j)`.
+    #[inline(always)]
+    pub fn new(i: usize, j: usize) -> Self {
+        Self { x0: i as f32, x1: (i + 1) as f32, y0: j as f32, y1: (j + 1) as f32 }
+    }
+
+    /// The grid coordinates of a crossing at `level`.
+    #[inline]
+    pub fn locate(&self, sub: &Subgrid, level: f32, at: Crossing) -> (f32, f32) {
+        let xc = self.x0 + 0.5;
+        let yc = self.y0 + 0.5;
+        match at {
+            Crossing::Node(n) => match n {
+                Node::LL => (self.x0, self.y0),
+                Node::LR => (self.x1, self.y0),
+                Node::UR => (self.x1, self.y1),
+                Node::UL => (self.x0, self.y1),
+                Node::C => (xc, yc),
+            },
+            Crossing::Edge(e) => {
+                let t = sub.crossing(e, level);
+                match e {
+                    Edge::B0 => (self.x0 + t, self.y0),
+                    Edge::B1 => (self.x1, self.y0 + t),
+                    Edge::B2 => (self.x0 + t, self.y1),
+                    Edge::B3 => (self.x0, self.y0 + t),
+                    Edge::S0 => (self.x0 + 0.5 * t, self.y0 + 0.5 * t),
+                    Edge::S1 => (self.x1 - 0.5 * t, self.y0 + 0.5 * t),
+                    Edge::S2 => (self.x1 - 0.5 * t, self.y1 - 0.5 * t),
+                    Edge::S3 => (self.x0 + 0.5 * t, self.y1 - 0.5 * t),
+                }
+            }
+        }
+    }
+}
+
+/// Pen state for one subgrid at one level.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Pen {
+    at: Option<Crossing>,
+    pending: Option<Crossing>,
+    lone: u16,
+    lined: u16,
+    segments: u128,
+}
+
+impl Pen {
+    /// A pen that has drawn nothing.
+    pub const fn new() -> Self {
+        Self { at: None, pending: None, lone: 0, lined: 0, segments: 0 }
+    }
+
+    /// Take one instruction; `out` receives the commands it yields, with the
+    /// crossing they are at.
+    #[inline]
+    pub fn step<E>(
+        &mut self,
+        conn: Conn,
+        x: Crossing,
+        mut out: impl FnMut(Command<Crossing>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        match (conn, self.at) {
+            (Conn::DrawTo, Some(at)) if at == x => {}
+            (Conn::DrawTo, Some(at)) if self.segments & pair_bit(at, x) != 0 => {
+                // Already drawn: move there with the beam off instead.
+                if let Some(p) = self.pending.replace(x) {
+                    self.lone |= bit(p);
+                }
+                self.at = Some(x);
+            }
+            (Conn::DrawTo, Some(at)) => {
+                self.segments |= pair_bit(at, x);
+                if let Some(p) = self.pending.take() {
+                    out(Command::MoveTo(p))?;
+                    self.lined |= bit(p);
+                }
+                out(Command::LineTo(x))?;
+                self.lined |= bit(x);
+                self.at = Some(x);
+            }
+            // A SETPOINT, or a DRAWTO with no pen down (treated as a SETPOINT).
+            _ => {
+                if let Some(p) = self.pending.replace(x) {
+                    self.lone |= bit(p);
+                }
+                self.at = Some(x);
+            }
+        }
+        Ok(())
+    }
+
+    /// End of the subgrid: emit the points that no line covers.
+    #[inline]
+    pub fn finish<E>(&mut self, mut out: impl FnMut(Command<Crossing>) -> Result<(), E>) -> Result<(), E> {
+        if let Some(p) = self.pending.take() {
+            self.lone |= bit(p);
+        }
+        let mut points = self.lone & !self.lined;
+        while points != 0 {
+            let i = points.trailing_zeros();
+            out(Command::Point(from_bit(i)))?;
+            points &= points - 1;
+        }
+        self.lone = 0;
+        Ok(())
+    }
+}

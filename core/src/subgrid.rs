@@ -1,0 +1,312 @@
+//! One 2x2 subgrid: its five nodes, eight edges and their downhill directions.
+//!
+//! Corners are numbered counterclockwise with x to the right and y up:
+//!
+//! ```text
+//!  UL(3) ---- B2 ---- UR(2)
+//!    |  \            /  |
+//!    B3  S3        S2   B1
+//!    |      \ C(4) /    |
+//!    |      /      \    |
+//!    |  S0            S1|
+//!  LL(0) ---- B0 ---- LR(1)
+//! ```
+//!
+//! Border edge `Bi` joins corner `i` and corner `i+1`; spoke `Si` joins corner
+//! `i` and the centre node `C`, whose value is the mean of the four corners.
+//! Every edge is directed downhill. An equal-valued border edge points
+//! counterclockwise (`i -> i+1`); an equal-valued spoke points toward the
+//! centre. The eight directions form the subgrid's [`DirectionCode`].
+
+/// A node of the subgrid graph.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
+pub enum Node {
+    /// Lower-left corner, grid point (i, j).
+    LL = 0,
+    /// Lower-right corner, grid point (i+1, j).
+    LR = 1,
+    /// Upper-right corner, grid point (i+1, j+1).
+    UR = 2,
+    /// Upper-left corner, grid point (i, j+1).
+    UL = 3,
+    /// Centre node at (i+0.5, j+0.5), the mean of the corners.
+    C = 4,
+}
+
+impl Node {
+    /// All nodes in index order.
+    pub const ALL: [Node; 5] = [Node::LL, Node::LR, Node::UR, Node::UL, Node::C];
+
+    /// The node with this index (0..5), or `None`.
+    pub const fn from_index(i: usize) -> Option<Node> {
+        match i {
+            0 => Some(Node::LL),
+            1 => Some(Node::LR),
+            2 => Some(Node::UR),
+            3 => Some(Node::UL),
+            4 => Some(Node::C),
+            _ => None,
+        }
+    }
+
+    /// The node's index (0..5).
+    pub const fn index(self) -> usize {
+        self as usize
+    }
+
+    /// Position in doubled cell units: corners at 0 or 2, the centre at 1.
+    pub(crate) const fn pos2(self) -> (i8, i8) {
+        match self {
+            Node::LL => (0, 0),
+            Node::LR => (2, 0),
+            Node::UR => (2, 2),
+            Node::UL => (0, 2),
+            Node::C => (1, 1),
+        }
+    }
+
+    /// Position within the cell in cell units (0.0, 0.5 or 1.0 per axis).
+    pub fn offset(self) -> (f32, f32) {
+        let (x, y) = self.pos2();
+        (f32::from(x) * 0.5, f32::from(y) * 0.5)
+    }
+}
+
+/// One of the eight edges of the subgrid graph.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
+pub enum Edge {
+    /// Border LL-LR (bottom).
+    B0 = 0,
+    /// Border LR-UR (right).
+    B1 = 1,
+    /// Border UR-UL (top).
+    B2 = 2,
+    /// Border UL-LL (left).
+    B3 = 3,
+    /// Spoke LL-C.
+    S0 = 4,
+    /// Spoke LR-C.
+    S1 = 5,
+    /// Spoke UR-C.
+    S2 = 6,
+    /// Spoke UL-C.
+    S3 = 7,
+}
+
+impl Edge {
+    /// All edges in index order (the bit order of a [`DirectionCode`]).
+    pub const ALL: [Edge; 8] =
+        [Edge::B0, Edge::B1, Edge::B2, Edge::B3, Edge::S0, Edge::S1, Edge::S2, Edge::S3];
+
+    /// The edge's index (0..8).
+    pub const fn index(self) -> usize {
+        self as usize
+    }
+
+    /// The edge with this index (0..8), or `None`.
+    pub const fn from_index(i: usize) -> Option<Edge> {
+        match i {
+            0 => Some(Edge::B0),
+            1 => Some(Edge::B1),
+            2 => Some(Edge::B2),
+            3 => Some(Edge::B3),
+            4 => Some(Edge::S0),
+            5 => Some(Edge::S1),
+            6 => Some(Edge::S2),
+            7 => Some(Edge::S3),
+            _ => None,
+        }
+    }
+
+    /// The edge's two nodes in its canonical interpolation order.
+    ///
+    /// Border edges run from the grid point with the smaller coordinates to
+    /// the larger one, so the two subgrids sharing an edge compute
+    /// bit-identical crossings. Spokes run from the corner to the centre.
+    pub const fn canonical(self) -> (Node, Node) {
+        match self {
+            Edge::B0 => (Node::LL, Node::LR),
+            Edge::B1 => (Node::LR, Node::UR),
+            Edge::B2 => (Node::UL, Node::UR),
+            Edge::B3 => (Node::LL, Node::UL),
+            Edge::S0 => (Node::LL, Node::C),
+            Edge::S1 => (Node::LR, Node::C),
+            Edge::S2 => (Node::UR, Node::C),
+            Edge::S3 => (Node::UL, Node::C),
+        }
+    }
+
+    /// The edge joining two nodes, if they are adjacent.
+    pub const fn between(a: Node, b: Node) -> Option<Edge> {
+        let (a, b) = if (a as u8) < (b as u8) { (a, b) } else { (b, a) };
+        match (a, b) {
+            (Node::LL, Node::LR) => Some(Edge::B0),
+            (Node::LR, Node::UR) => Some(Edge::B1),
+            (Node::UR, Node::UL) => Some(Edge::B2),
+            (Node::LL, Node::UL) => Some(Edge::B3),
+            (Node::LL, Node::C) => Some(Edge::S0),
+            (Node::LR, Node::C) => Some(Edge::S1),
+            (Node::UR, Node::C) => Some(Edge::S2),
+            (Node::UL, Node::C) => Some(Edge::S3),
+            _ => None,
+        }
+    }
+}
+
+/// The downhill directions of the eight edges, one bit per edge
+/// (bit `i` for [`Edge`] index `i`).
+///
+/// For a border edge `Bi` the bit is set when it points counterclockwise,
+/// `i -> i+1` (value at `i` >= value at `i+1`); for a spoke `Si` it is set when
+/// it points toward the centre (corner value >= centre value).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DirectionCode(pub u8);
+
+impl DirectionCode {
+    /// The edge's `(from, to)` nodes under this code: the edge points
+    /// downhill from `from` to `to`.
+    pub const fn directed(self, edge: Edge) -> (Node, Node) {
+        let set = self.0 & (1 << edge as u8) != 0;
+        match edge {
+            Edge::S0 | Edge::S1 | Edge::S2 | Edge::S3 => {
+                let corner = edge.canonical().0;
+                if set { (corner, Node::C) } else { (Node::C, corner) }
+            }
+            _ => {
+                // Counterclockwise order along the border: corner i -> i+1.
+                let i = edge as usize;
+                let (a, b) = match (Node::from_index(i), Node::from_index((i + 1) % 4)) {
+                    (Some(a), Some(b)) => (a, b),
+                    _ => (Node::LL, Node::LL), // unreachable: i < 4
+                };
+                if set { (a, b) } else { (b, a) }
+            }
+        }
+    }
+}
+
+/// The five node values of one subgrid, all finite.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Subgrid {
+    values: [f32; 5],
+}
+
+/// Why a subgrid could not be formed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SubgridError {
+    /// A corner is NaN or infinite.
+    NonFinite,
+}
+
+impl core::fmt::Display for SubgridError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            SubgridError::NonFinite => f.write_str("a subgrid corner is NaN or infinite"),
+        }
+    }
+}
+
+impl core::error::Error for SubgridError {}
+
+impl Subgrid {
+    /// A subgrid from its corner values in counterclockwise order
+    /// (LL, LR, UR, UL). The centre is their mean.
+    ///
+    /// # Errors
+    /// [`SubgridError::NonFinite`] when a corner is NaN or infinite.
+    #[inline]
+    pub fn new(ll: f32, lr: f32, ur: f32, ul: f32) -> Result<Self, SubgridError> {
+        if ll.is_finite() & lr.is_finite() & ur.is_finite() & ul.is_finite() {
+            Ok(Self::from_finite(ll, lr, ur, ul))
+        } else {
+            Err(SubgridError::NonFinite)
+        }
+    }
+
+    /// As [`Subgrid::new`] for corners already known to be finite.
+    ///
+    /// The mean is formed from quarters so that it cannot overflow; it always
+    /// lies between the smallest and the largest corner.
+    #[inline(always)]
+    pub(crate) fn from_finite(ll: f32, lr: f32, ur: f32, ul: f32) -> Self {
+        let c = (ll * 0.25 + lr * 0.25) + (ur * 0.25 + ul * 0.25);
+        let lo = ll.min(lr).min(ur.min(ul));
+        let hi = ll.max(lr).max(ur.max(ul));
+        Self { values: [ll, lr, ur, ul, c.max(lo).min(hi)] }
+    }
+
+    /// The value at a node.
+    #[inline(always)]
+    pub fn value(&self, node: Node) -> f32 {
+        let [ll, lr, ur, ul, c] = self.values;
+        match node {
+            Node::LL => ll,
+            Node::LR => lr,
+            Node::UR => ur,
+            Node::UL => ul,
+            Node::C => c,
+        }
+    }
+
+    /// All five values, indexed by [`Node::index`].
+    pub fn values(&self) -> [f32; 5] {
+        self.values
+    }
+
+    /// True when all four corners are equal (the paper draws nothing then).
+    pub fn is_constant(&self) -> bool {
+        let v = &self.values;
+        v[0] == v[1] && v[1] == v[2] && v[2] == v[3]
+    }
+
+    /// The downhill direction of every edge.
+    #[inline(always)]
+    pub fn code(&self) -> DirectionCode {
+        let v = &self.values;
+        let c = v[4];
+        let b = u8::from(v[0] >= v[1])
+            | u8::from(v[1] >= v[2]) << 1
+            | u8::from(v[2] >= v[3]) << 2
+            | u8::from(v[3] >= v[0]) << 3
+            | u8::from(v[0] >= c) << 4
+            | u8::from(v[1] >= c) << 5
+            | u8::from(v[2] >= c) << 6
+            | u8::from(v[3] >= c) << 7;
+        DirectionCode(b)
+    }
+
+    /// Where the level crosses `edge`, as a fraction along its canonical
+    /// direction (0.0 at the first node, 1.0 at the second), clamped to
+    /// [0, 1]. A crossing at a node is exact (0.0 or 1.0).
+    #[inline]
+    pub fn crossing(&self, edge: Edge, level: f32) -> f32 {
+        let (a, b) = edge.canonical();
+        let (va, vb) = (self.value(a), self.value(b));
+        if va == level {
+            return 0.0;
+        }
+        if vb == level {
+            return 1.0;
+        }
+        let mut num = level - va;
+        let mut den = vb - va;
+        if !(num.is_finite() && den.is_finite()) {
+            // Extreme values: halve everything so the differences fit.
+            num = level * 0.5 - va * 0.5;
+            den = vb * 0.5 - va * 0.5;
+        }
+        let t = num / den;
+        if t >= 0.0 {
+            if t <= 1.0 { t } else { 1.0 }
+        } else {
+            0.0 // also NaN (a zero-length range never contains a crossing)
+        }
+    }
+}

@@ -1,0 +1,297 @@
+//! Contouring trees (Zyda, section 5), built for all 256 direction codes at
+//! compile time.
+//!
+//! The subgrid graph has five nodes and eight downhill edges. Its roots are
+//! the nodes of in-degree 0: none for a constant subgrid (which draws nothing),
+//! one, or two for a saddle. Each root gets its own tree, built with the other
+//! root and its edges removed. A node of in-degree n > 1 is duplicated so that
+//! each incoming edge has its own copy; the copy met first in pre-order keeps
+//! the node's outgoing edges, the others are leaves. So each tree holds every
+//! graph edge it can reach exactly once, as the paper's completeness proof
+//! counts them (three edges fixed by the root, five more placed below).
+//!
+//! Children are ordered counterclockwise, starting just past the direction
+//! back to the parent; a root corner starts from the direction pointing away
+//! from the centre. With this order the traversal reproduces the paper's
+//! Figures 5b and 7b exactly.
+//!
+//! A tree depends only on the [`DirectionCode`], never on the level, so the
+//! [`TEMPLATES`] table is computed once by `const fn` and lives in flash on the
+//! MCU (see [`TEMPLATE_TABLE_BYTES`]). Traversal is in [`crate::trace`].
+
+use crate::subgrid::{DirectionCode, Edge, Node};
+
+/// Most trees in one subgrid (two, for a saddle).
+pub const MAX_TREES: usize = 2;
+
+/// Most entries in one template: each tree holds its root plus at most the
+/// eight graph edges.
+pub const MAX_ENTRIES: usize = MAX_TREES * 9;
+
+/// One node copy in a flattened, pre-order contouring tree.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Entry {
+    node: u8,
+    parent: u8,
+    end: u8,
+    /// bit 0: first copy of a sink node in its tree; bits 3..8: nodes met
+    /// earlier in the tree's pre-order.
+    flags: u8,
+}
+
+impl Entry {
+    const EMPTY: Entry = Entry { node: 0, parent: 0, end: 0, flags: 0 };
+
+    /// The grid node this entry is a copy of.
+    #[inline(always)]
+    pub fn node(&self) -> Node {
+        node_of(self.node)
+    }
+
+    /// The node of the tree parent (the upper end of the tree edge that
+    /// leads here); the node itself for a root.
+    #[inline(always)]
+    pub fn parent(&self) -> Node {
+        node_of(self.parent)
+    }
+
+    /// True for a tree's root.
+    #[inline(always)]
+    pub fn is_root(&self) -> bool {
+        self.node == self.parent
+    }
+
+    /// The tree edge from the parent, `None` for a root.
+    #[inline(always)]
+    pub fn edge(&self) -> Option<Edge> {
+        Edge::between(self.parent(), self.node())
+    }
+
+    /// Index one past this entry's subtree in the template's entry array.
+    #[inline(always)]
+    pub fn subtree_end(&self) -> usize {
+        usize::from(self.end)
+    }
+
+    /// True when this is the first copy of a sink node (out-degree 0) in the
+    /// tree's pre-order: the paper places a SETPOINT there.
+    #[inline(always)]
+    pub fn is_first_sink(&self) -> bool {
+        self.flags & 1 != 0
+    }
+
+    /// Bit mask (bit `Node::index()`) of the nodes met before this entry in
+    /// its tree's pre-order; the entry is a "new lowest value" when its value
+    /// is below all of them.
+    #[inline(always)]
+    pub fn earlier(&self) -> u8 {
+        self.flags >> 3
+    }
+}
+
+#[inline(always)]
+fn node_of(i: u8) -> Node {
+    match i {
+        0 => Node::LL,
+        1 => Node::LR,
+        2 => Node::UR,
+        3 => Node::UL,
+        _ => Node::C,
+    }
+}
+
+/// The contouring trees of one direction code, flattened in pre-order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Template {
+    entries: [Entry; MAX_ENTRIES],
+    /// Tree `t` spans entries `[start(t), tree_end[t])`.
+    tree_end: [u8; MAX_TREES],
+    trees: u8,
+}
+
+impl Template {
+    /// The precomputed template for a direction code.
+    #[inline(always)]
+    pub fn for_code(code: DirectionCode) -> &'static Template {
+        TEMPLATES.get(usize::from(code.0)).unwrap_or(&EMPTY)
+    }
+
+    /// How many trees (roots): 0, 1 or 2.
+    #[inline(always)]
+    pub fn tree_count(&self) -> usize {
+        usize::from(self.trees)
+    }
+
+    /// All entries of all trees.
+    #[inline(always)]
+    pub fn entries(&self) -> &[Entry] {
+        let n = self.tree_end.get(self.tree_count().wrapping_sub(1)).copied().unwrap_or(0);
+        self.entries.get(..usize::from(n)).unwrap_or(&[])
+    }
+
+    /// The entry index range of tree `t` (empty past the last tree).
+    #[inline(always)]
+    pub fn tree_range(&self, t: usize) -> core::ops::Range<usize> {
+        if t >= self.tree_count() {
+            return 0..0;
+        }
+        let end = |t: usize| self.tree_end.get(t).map_or(0, |&e| usize::from(e));
+        let start = if t == 0 { 0 } else { end(t - 1) };
+        start..end(t)
+    }
+}
+
+static EMPTY: Template =
+    Template { entries: [Entry::EMPTY; MAX_ENTRIES], tree_end: [0; MAX_TREES], trees: 0 };
+
+// The builder below runs at compile time only (for `TEMPLATES`): an index out
+// of range there is a build error, never a run-time panic.
+
+/// Direction from one node to another as an octant (0 = east,
+/// counterclockwise in steps of 45 degrees).
+const fn octant(from: u8, to: u8) -> u8 {
+    let (ax, ay) = pos2(from);
+    let (bx, by) = pos2(to);
+    let dx = (bx - ax).signum();
+    let dy = (by - ay).signum();
+    match (dx, dy) {
+        (1, 0) => 0,
+        (1, 1) => 1,
+        (0, 1) => 2,
+        (-1, 1) => 3,
+        (-1, 0) => 4,
+        (-1, -1) => 5,
+        (0, -1) => 6,
+        _ => 7,
+    }
+}
+
+const fn pos2(n: u8) -> (i8, i8) {
+    match n {
+        0 => (0, 0),
+        1 => (2, 0),
+        2 => (2, 2),
+        3 => (0, 2),
+        _ => (1, 1),
+    }
+}
+
+/// Out-neighbour masks of the five nodes under a direction code.
+#[allow(clippy::indexing_slicing)]
+const fn out_masks(code: u8) -> [u8; 5] {
+    let mut out = [0u8; 5];
+    let mut e = 0;
+    while e < 8 {
+        let (from, to) = DirectionCode(code).directed(Edge::ALL[e]);
+        out[from as usize] |= 1 << (to as u8);
+        e += 1;
+    }
+    out
+}
+
+struct Builder {
+    entries: [Entry; MAX_ENTRIES],
+    len: usize,
+    expanded: u8,
+}
+
+#[allow(clippy::indexing_slicing)]
+const fn dfs(b: &mut Builder, out: &[u8; 5], removed: u8, node: u8, parent: u8) {
+    let idx = b.len;
+    b.entries[idx] = Entry { node, parent, end: 0, flags: 0 };
+    b.len += 1;
+    if b.expanded & (1 << node) == 0 {
+        b.expanded |= 1 << node;
+        let start = if node != parent {
+            (octant(node, parent) + 1) & 7
+        } else if node == 4 {
+            0 // a centre root cannot come from real values; any order will do
+        } else {
+            octant(4, node) // away from the centre
+        };
+        let mut k = 0;
+        while k < 8 {
+            let dir = (start + k) & 7;
+            let mut c = 0;
+            while c < 5 {
+                let bit = 1u8 << c;
+                if out[node as usize] & bit != 0 && removed & bit == 0 && octant(node, c) == dir {
+                    dfs(b, out, removed, c, node);
+                }
+                c += 1;
+            }
+            k += 1;
+        }
+    }
+    b.entries[idx].end = b.len as u8;
+}
+
+#[allow(clippy::indexing_slicing)]
+const fn build(code: u8) -> Template {
+    let out = out_masks(code);
+    let mut indeg = [0u8; 5];
+    let mut n = 0;
+    while n < 5 {
+        let mut m = 0;
+        while m < 5 {
+            if out[m] & (1 << n) != 0 {
+                indeg[n] += 1;
+            }
+            m += 1;
+        }
+        n += 1;
+    }
+    let mut roots = 0u8;
+    n = 0;
+    while n < 5 {
+        if indeg[n] == 0 {
+            roots |= 1 << n;
+        }
+        n += 1;
+    }
+    let mut b = Builder { entries: [Entry::EMPTY; MAX_ENTRIES], len: 0, expanded: 0 };
+    let mut tree_end = [0u8; MAX_TREES];
+    let mut trees = 0usize;
+    let mut r = 0u8;
+    while r < 5 {
+        if roots & (1 << r) != 0 {
+            let start = b.len;
+            b.expanded = 0;
+            dfs(&mut b, &out, roots & !(1 << r), r, r);
+            // Drawing-command placement: nodes met earlier, first sink copies.
+            let mut seen = 0u8;
+            let mut i = start;
+            while i < b.len {
+                let node = b.entries[i].node;
+                let first_sink = out[node as usize] == 0 && seen & (1 << node) == 0;
+                b.entries[i].flags = (seen << 3) | first_sink as u8;
+                seen |= 1 << node;
+                i += 1;
+            }
+            tree_end[trees] = b.len as u8;
+            trees += 1;
+        }
+        r += 1;
+    }
+    Template { entries: b.entries, tree_end, trees: trees as u8 }
+}
+
+#[allow(clippy::indexing_slicing)]
+const fn build_all() -> [Template; 256] {
+    let mut all = [EMPTY; 256];
+    let mut code = 0;
+    while code < 256 {
+        all[code] = build(code as u8);
+        code += 1;
+    }
+    all
+}
+
+/// The contouring-tree templates of all 256 direction codes, built at compile
+/// time by the construction above.
+pub static TEMPLATES: [Template; 256] = build_all();
+
+/// Bytes the template table occupies (in flash on the MCU).
+pub const TEMPLATE_TABLE_BYTES: usize = core::mem::size_of::<[Template; 256]>();

@@ -1,0 +1,10 @@
+//! isoscope's host side: the same `isoscope-core` under `std`.
+//!
+//! - [`volume`]: volume sources (raw files, built-in demos) and sample types.
+//! - [`contour`]: parallel chicken-wire contouring of a volume into records,
+//!   and their CSV export.
+//! - [`progress`]: progress lines on a terminal for long work.
+
+pub mod contour;
+pub mod progress;
+pub mod volume;

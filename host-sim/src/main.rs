@@ -1,0 +1,212 @@
+//! `isoscope-sim`: the isoscope core on the host.
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use isoscope_core::grid::{Plane, Volume};
+use isoscope_core::sample::Sample;
+use isoscope_core::trace::Traversal;
+use isoscope_sim::contour::{Job, contour_volume, write_csv};
+use isoscope_sim::progress::Progress;
+use isoscope_sim::volume::{DemoSpec, Dims, Dtype, LoadedVolume, Samples};
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "isoscope-sim",
+    version,
+    about = "The isoscope contouring core on the host: contour volumes, export, simulate"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Cmd,
+}
+
+#[derive(Subcommand, Debug)]
+enum Cmd {
+    /// Contour every slice of a volume (a chicken-wire surface) and export the
+    /// drawing commands as CSV: level,axis,slice,op,x,y,z.
+    Contour(ContourArgs),
+}
+
+#[derive(Args, Debug)]
+struct Source {
+    /// Raw little-endian volume file, x fastest (needs --dims and --dtype).
+    #[arg(conflicts_with = "demo")]
+    input: Option<PathBuf>,
+    /// Volume extents NXxNYxNZ (a 2D grid has NZ = 1).
+    #[arg(long, requires = "input")]
+    dims: Option<Dims>,
+    /// Sample type of the raw file.
+    #[arg(long, requires = "input")]
+    dtype: Option<Dtype>,
+    /// A built-in volume instead of a file: hydrogen:N (the paper's Figure 1,
+    /// 3d_xy orbital) or gyroid:N.
+    #[arg(long, value_name = "NAME:N")]
+    demo: Option<DemoSpec>,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum Format {
+    /// One command per line.
+    Csv,
+    /// Write nothing (for timing with --stats).
+    None,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum TraversalArg {
+    /// The paper's Figure 8 with the pen restored after equal-valued edges.
+    Corrected,
+    /// Figure 8 exactly as printed (wrong for ~1% of subgrids with nodes at the level).
+    Literal,
+}
+
+#[derive(Args, Debug)]
+struct ContourArgs {
+    #[command(flatten)]
+    source: Source,
+    /// Contour level (repeatable). Default for a demo: its characteristic level.
+    #[arg(long = "level", value_name = "L", allow_negative_numbers = true)]
+    levels: Vec<f32>,
+    /// Slicing planes, comma-separated: xy, xz, yz.
+    #[arg(long, default_value = "xy,xz,yz", value_delimiter = ',')]
+    axes: Vec<String>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Output format.
+    #[arg(long, value_enum, default_value = "csv")]
+    format: Format,
+    /// Output file (default: standard output).
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+    /// Print cells, crossing cells, commands, seconds and Mcells/s of the
+    /// contouring alone to standard error.
+    #[arg(long)]
+    stats: bool,
+    /// Which traversal of the contouring trees.
+    #[arg(long, value_enum, default_value = "corrected")]
+    traversal: TraversalArg,
+}
+
+fn load(source: &Source) -> Result<(LoadedVolume, Option<DemoSpec>)> {
+    match (&source.input, source.demo) {
+        (Some(path), None) => {
+            let dims = source.dims.context("a volume file needs --dims NXxNYxNZ")?;
+            let dtype = source.dtype.context("a volume file needs --dtype u8|u16|i16|f32")?;
+            Ok((LoadedVolume::read_raw(path, dims, dtype)?, None))
+        }
+        (None, Some(spec)) => Ok((LoadedVolume::demo(spec)?, Some(spec))),
+        _ => bail!("give a volume file (with --dims and --dtype) or --demo NAME:N"),
+    }
+}
+
+fn planes(axes: &[String]) -> Result<Vec<Plane>> {
+    let mut out = Vec::new();
+    for a in axes {
+        let p = Plane::from_name(a.trim())
+            .with_context(|| format!("unknown axes `{a}` (expected xy, xz or yz)"))?;
+        if !out.contains(&p) {
+            out.push(p);
+        }
+    }
+    if out.is_empty() {
+        bail!("--axes names no plane");
+    }
+    Ok(out)
+}
+
+fn contour(args: &ContourArgs) -> Result<()> {
+    let (vol, demo) = load(&args.source)?;
+    let levels = if args.levels.is_empty() {
+        match demo {
+            Some(d) => vec![d.demo.default_level()],
+            None => bail!("give at least one --level for a volume file"),
+        }
+    } else {
+        args.levels.clone()
+    };
+    let planes = planes(&args.axes)?;
+    let threads = match args.threads {
+        Some(0) => bail!("--threads must be at least 1"),
+        Some(n) => n,
+        None => std::thread::available_parallelism().map_or(1, |n| n.get()),
+    };
+    let traversal = match args.traversal {
+        TraversalArg::Corrected => Traversal::Corrected,
+        TraversalArg::Literal => Traversal::Literal,
+    };
+    let job = Job {
+        planes: &planes,
+        levels: &levels,
+        traversal,
+        threads,
+        keep: matches!(args.format, Format::Csv),
+    };
+    let Dims(nx, ny, nz) = vol.dims;
+    fn run<T: Sample + Sync>(
+        data: &[T],
+        d: (usize, usize, usize),
+        job: &Job<'_>,
+    ) -> Result<isoscope_sim::contour::Contoured> {
+        let v = Volume::new(data, d.0, d.1, d.2)?;
+        let total = job.planes.iter().map(|&p| v.slice_count(p)).sum();
+        let progress = Progress::new("contouring slices", total);
+        contour_volume(&v, job, Some(&progress))
+    }
+    let d = (nx, ny, nz);
+    let result = match &vol.samples {
+        Samples::U8(s) => run(s, d, &job),
+        Samples::U16(s) => run(s, d, &job),
+        Samples::I16(s) => run(s, d, &job),
+        Samples::F32(s) => run(s, d, &job),
+    }?;
+    if let Format::Csv = args.format {
+        match &args.output {
+            Some(path) => {
+                let f = std::fs::File::create(path)
+                    .with_context(|| format!("cannot create {}", path.display()))?;
+                write_csv(std::io::BufWriter::new(f), &result, &levels)
+                    .with_context(|| format!("cannot write {}", path.display()))?;
+            }
+            None => {
+                let out = std::io::stdout().lock();
+                if let Err(e) = write_csv(std::io::BufWriter::new(out), &result, &levels) {
+                    if e.kind() != std::io::ErrorKind::BrokenPipe {
+                        return Err(e).context("cannot write to standard output");
+                    }
+                }
+            }
+        }
+    }
+    if args.stats {
+        let s = result.stats;
+        let mcells = s.cells as f64 / result.seconds.max(1e-9) / 1e6;
+        let mut e = std::io::stderr().lock();
+        writeln!(e, "cells={}", s.cells)?;
+        writeln!(e, "crossing_cells={}", s.crossing_cells)?;
+        writeln!(e, "nonfinite_cells={}", s.nonfinite_cells)?;
+        writeln!(e, "commands={}", s.commands)?;
+        writeln!(e, "levels={}", levels.len())?;
+        writeln!(e, "threads={}", threads)?;
+        writeln!(e, "seconds={:.6}", result.seconds)?;
+        writeln!(e, "mcells_per_s={mcells:.1}")?;
+    }
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let r = match &cli.command {
+        Cmd::Contour(a) => contour(a),
+    };
+    match r {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("isoscope-sim: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,174 @@
+//! Volume sources: raw little-endian files and the built-in demos.
+
+use anyhow::{Context, Result, bail};
+use isoscope_core::demo::Demo;
+use std::path::Path;
+
+/// A sample type of a raw volume file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Dtype {
+    /// Unsigned 8-bit (MRI).
+    U8,
+    /// Unsigned 16-bit little-endian.
+    U16,
+    /// Signed 16-bit little-endian (CT).
+    I16,
+    /// IEEE 754 single little-endian (simulation, EM).
+    F32,
+}
+
+impl Dtype {
+    /// Bytes per sample.
+    pub fn size(self) -> usize {
+        match self {
+            Dtype::U8 => 1,
+            Dtype::U16 | Dtype::I16 => 2,
+            Dtype::F32 => 4,
+        }
+    }
+}
+
+impl std::str::FromStr for Dtype {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "u8" => Ok(Dtype::U8),
+            "u16" => Ok(Dtype::U16),
+            "i16" => Ok(Dtype::I16),
+            "f32" => Ok(Dtype::F32),
+            _ => Err(format!("unknown sample type `{s}` (expected u8, u16, i16 or f32)")),
+        }
+    }
+}
+
+/// Volume extents parsed from `NXxNYxNZ`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Dims(pub usize, pub usize, pub usize);
+
+impl Dims {
+    /// Samples in the volume.
+    pub fn count(self) -> Option<usize> {
+        self.0.checked_mul(self.1)?.checked_mul(self.2)
+    }
+}
+
+impl std::str::FromStr for Dims {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let parts: Vec<&str> = s.split(['x', 'X']).collect();
+        let bad = || format!("`{s}` is not NXxNYxNZ (e.g. 128x128x84)");
+        if parts.len() != 3 {
+            return Err(bad());
+        }
+        let mut n = [0usize; 3];
+        for (slot, p) in n.iter_mut().zip(&parts) {
+            *slot = p.trim().parse().map_err(|_| bad())?;
+            if *slot == 0 {
+                return Err(format!("`{s}`: every extent must be at least 1"));
+            }
+        }
+        Ok(Dims(n[0], n[1], n[2]))
+    }
+}
+
+/// A built-in demo and its size, parsed from `NAME:N`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct DemoSpec {
+    /// Which demo.
+    pub demo: Demo,
+    /// Samples per axis.
+    pub n: usize,
+}
+
+/// Largest demo edge: 1024^3 f32 is 4 GiB.
+pub const MAX_DEMO_N: usize = 1024;
+
+impl std::str::FromStr for DemoSpec {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let names = Demo::ALL.map(|d| d.name()).join(", ");
+        let (name, n) = s.split_once(':').unwrap_or((s, "32"));
+        let demo = Demo::from_name(name)
+            .ok_or_else(|| format!("unknown demo `{name}` (expected one of: {names})"))?;
+        let n: usize = n
+            .parse()
+            .map_err(|_| format!("`{s}`: the size after `:` must be a whole number, e.g. {name}:32"))?;
+        if !(2..=MAX_DEMO_N).contains(&n) {
+            return Err(format!("`{s}`: the size must be between 2 and {MAX_DEMO_N}"));
+        }
+        Ok(DemoSpec { demo, n })
+    }
+}
+
+/// The samples of a loaded volume, in their own type.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Samples {
+    /// u8 samples.
+    U8(Vec<u8>),
+    /// u16 samples.
+    U16(Vec<u16>),
+    /// i16 samples.
+    I16(Vec<i16>),
+    /// f32 samples.
+    F32(Vec<f32>),
+}
+
+/// A loaded volume.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoadedVolume {
+    /// Extents.
+    pub dims: Dims,
+    /// Samples, x fastest.
+    pub samples: Samples,
+}
+
+impl LoadedVolume {
+    /// Compute a built-in demo.
+    pub fn demo(spec: DemoSpec) -> Result<Self> {
+        let n = spec.n;
+        let mut data = vec![0f32; n * n * n];
+        spec.demo.fill(n, &mut data)?;
+        Ok(Self { dims: Dims(n, n, n), samples: Samples::F32(data) })
+    }
+
+    /// Decode raw little-endian samples.
+    pub fn from_bytes(bytes: &[u8], dims: Dims, dtype: Dtype) -> Result<Self> {
+        let count = dims.count().context("the volume extents overflow")?;
+        let expected = count.checked_mul(dtype.size()).context("the volume extents overflow")?;
+        if bytes.len() != expected {
+            bail!(
+                "the file holds {} bytes but {}x{}x{} {:?} samples need {} bytes{}",
+                bytes.len(),
+                dims.0,
+                dims.1,
+                dims.2,
+                dtype,
+                expected,
+                if bytes.len() < expected {
+                    " (truncated, or wrong --dims/--dtype?)"
+                } else {
+                    " (wrong --dims/--dtype?)"
+                }
+            );
+        }
+        let samples = match dtype {
+            Dtype::U8 => Samples::U8(bytes.to_vec()),
+            Dtype::U16 => {
+                Samples::U16(bytes.chunks_exact(2).map(|c| u16::from_le_bytes([c[0], c[1]])).collect())
+            }
+            Dtype::I16 => {
+                Samples::I16(bytes.chunks_exact(2).map(|c| i16::from_le_bytes([c[0], c[1]])).collect())
+            }
+            Dtype::F32 => Samples::F32(
+                bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect(),
+            ),
+        };
+        Ok(Self { dims, samples })
+    }
+
+    /// Read a raw little-endian volume file.
+    pub fn read_raw(path: &Path, dims: Dims, dtype: Dtype) -> Result<Self> {
+        let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+        Self::from_bytes(&bytes, dims, dtype).with_context(|| format!("cannot load {}", path.display()))
+    }
+}
