@@ -6,11 +6,13 @@
 
 use crate::command::{Command, CommandSink};
 use crate::grid::{Grid2, GridError};
-use crate::pen::{Pen, Placement};
+use crate::pen::{Pen, Placed, Placement};
 use crate::sample::Sample;
 use crate::subgrid::Subgrid;
-use crate::trace::{Traversal, visit};
+use crate::sweep::{BLOCK, Layout, Rows, Sweep, gather};
+use crate::trace::{Crossing, Traversal, visit};
 use crate::tree::Template;
+use core::ops::Range;
 
 /// Why contouring stopped.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -101,15 +103,13 @@ pub fn contour_subgrid<P, S: CommandSink<P>>(
     let mut sent = 0u64;
     for (li, &level) in levels.iter().enumerate() {
         let mut pen = Pen::new();
-        let mut err = None;
-        let mut out = |c: Command<_>| {
-            let c = c.map(|x| {
-                let (u, v) = at.locate(sub, level, x);
-                place(u, v)
-            });
+        let mut placed = Placed::new();
+        let mut send = |c: Command<(f32, f32)>| {
             sent += 1;
-            sink.command(li, c)
+            sink.command(li, c.map(|(x, y)| place(x, y)))
         };
+        let mut out = |c: Command<Crossing>| placed.step(c.map(|x| at.locate(sub, level, x)), &mut send);
+        let mut err = None;
         visit(sub, tpl, level, traversal, |conn, x| {
             if err.is_none() {
                 if let Err(e) = pen.step(conn, x, &mut out) {
@@ -121,6 +121,7 @@ pub fn contour_subgrid<P, S: CommandSink<P>>(
             return Err(e);
         }
         pen.finish(&mut out)?;
+        placed.finish(&mut send)?;
     }
     Ok(sent)
 }
@@ -138,37 +139,53 @@ pub fn contour_grid<T: Sample, P, S: CommandSink<P>>(
     place: impl Fn(f32, f32) -> P,
     sink: &mut S,
 ) -> Result<ContourStats, ContourError<S::Error>> {
+    contour_rows(grid, 0..grid.ny() - 1, levels, traversal, place, sink)
+}
+
+/// As [`contour_grid`], for the cell rows `rows` only (row `j` holds the
+/// subgrids between grid rows `j` and `j + 1`; rows past the end are
+/// ignored).
+///
+/// # Errors
+/// [`ContourError::NonFiniteLevel`] before anything is drawn, or the sink's
+/// error.
+pub fn contour_rows<T: Sample, P, S: CommandSink<P>>(
+    grid: &Grid2<'_, T>,
+    rows: Range<usize>,
+    levels: &[f32],
+    traversal: Traversal,
+    place: impl Fn(f32, f32) -> P,
+    sink: &mut S,
+) -> Result<ContourStats, ContourError<S::Error>> {
     check_levels(levels)?;
+    let sweep = Sweep::new(levels, traversal);
     let mut stats = ContourStats::default();
-    let (lo_level, hi_level) =
-        levels.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &l| (a.min(l), b.max(l)));
+    let mut buf = Rows::new();
+    let (data, offset, sx, sy) = grid.layout();
     let (nx, ny) = (grid.nx(), grid.ny());
-    for j in 0..ny - 1 {
-        let mut a = grid.value(0, j);
-        let mut d = grid.value(0, j + 1);
-        for i in 0..nx - 1 {
-            let b = grid.value(i + 1, j);
-            let c = grid.value(i + 1, j + 1);
-            let (ll, ul) = (a, d);
-            a = b;
-            d = c;
-            if !(ll.is_finite() & b.is_finite() & c.is_finite() & ul.is_finite()) {
-                stats.nonfinite_cells += 1;
-                continue;
-            }
-            let lo = ll.min(b).min(c.min(ul));
-            let hi = ll.max(b).max(c.max(ul));
-            // No level can meet this subgrid; a constant one draws nothing.
-            if hi_level < lo || lo_level > hi || lo == hi {
-                continue;
-            }
-            let sub = Subgrid::from_finite(ll, b, c, ul);
-            let sent = contour_subgrid(&sub, Placement::new(i, j), levels, traversal, &place, sink)
+    let rows = rows.start..rows.end.min(ny - 1);
+    for j in rows.clone() {
+        let mut i0 = 0;
+        while i0 + 1 < nx {
+            let n = (nx - 1 - i0).min(BLOCK);
+            let start = offset + j * sy + i0 * sx;
+            let [r0, r1, ..] = &mut buf.v;
+            gather(data, start, sx, r0.get_mut(..=n).unwrap_or(&mut []));
+            gather(data, start + sy, sx, r1.get_mut(..=n).unwrap_or(&mut []));
+            sweep
+                .run(
+                    &mut buf,
+                    Layout::TwoRows,
+                    n,
+                    |k| Placement::new(i0 + k, j),
+                    |_, x, y| place(x, y),
+                    sink,
+                    &mut stats,
+                )
                 .map_err(ContourError::Sink)?;
-            stats.crossing_cells += u64::from(sent > 0);
-            stats.commands += sent;
+            i0 += n;
         }
     }
-    stats.cells = grid.cells() as u64;
+    stats.cells = ((nx - 1) * rows.len()) as u64;
     Ok(stats)
 }

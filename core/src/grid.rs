@@ -155,10 +155,11 @@ impl<'a, T: Sample> Grid2<'a, T> {
         }
     }
 
-    /// The sample at `(i, j)` as `f32`; NaN outside the grid.
+    /// The samples, offset and strides `(sx, sy)`: sample `(i, j)` is
+    /// `data[offset + i * sx + j * sy]`.
     #[inline(always)]
-    pub(crate) fn value(&self, i: usize, j: usize) -> f32 {
-        self.data.get(self.offset + i * self.sx + j * self.sy).map_or(f32::NAN, |s| s.to_f32())
+    pub(crate) fn layout(&self) -> (&'a [T], usize, usize, usize) {
+        (self.data, self.offset, self.sx, self.sy)
     }
 }
 

@@ -41,5 +41,6 @@ pub mod pen;
 pub mod sample;
 pub mod subgrid;
 pub mod surface;
+mod sweep;
 pub mod trace;
 pub mod tree;

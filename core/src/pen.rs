@@ -12,30 +12,37 @@ use crate::command::Command;
 use crate::subgrid::{Edge, Node, Subgrid};
 use crate::trace::{Conn, Crossing};
 
-/// Index of a crossing in a 13-bit mask: nodes 0..5, edges 5..13.
+/// Bit of a crossing in a 13-bit mask.
 #[inline(always)]
 fn bit(x: Crossing) -> u16 {
-    match x {
-        Crossing::Node(n) => 1 << n.index(),
-        Crossing::Edge(e) => 1 << (5 + e.index()),
-    }
+    1 << (x.index() & 15)
 }
 
-/// Index of the segment between two distinct crossings in a 78-bit mask.
+/// Bit index of each unordered pair of crossings in a 78-bit mask (built at
+/// compile time; an index out of range there is a build error).
+#[allow(clippy::indexing_slicing)]
+const PAIRS: [[u8; Crossing::COUNT]; Crossing::COUNT] = {
+    let mut t = [[0u8; Crossing::COUNT]; Crossing::COUNT];
+    let mut next = 0u8;
+    let mut a = 0;
+    while a < Crossing::COUNT {
+        let mut b = a + 1;
+        while b < Crossing::COUNT {
+            t[a][b] = next;
+            t[b][a] = next;
+            next += 1;
+            b += 1;
+        }
+        a += 1;
+    }
+    t
+};
+
+/// Bit of the segment between two crossings in a 78-bit mask.
 #[inline(always)]
 fn pair_bit(a: Crossing, b: Crossing) -> u128 {
-    let (a, b) = (bit(a).trailing_zeros(), bit(b).trailing_zeros());
-    let (lo, hi) = if a < b { (a, b) } else { (b, a) };
-    1u128 << (hi * (hi - 1) / 2 + lo)
-}
-
-#[inline(always)]
-fn from_bit(i: u32) -> Crossing {
-    if i < 5 {
-        Crossing::Node(Node::from_index(i as usize).unwrap_or(Node::C))
-    } else {
-        Crossing::Edge(Edge::from_index(i as usize - 5).unwrap_or(Edge::B0))
-    }
+    let i = PAIRS.get(a.index()).and_then(|r| r.get(b.index())).copied().unwrap_or(127);
+    1u128 << (i & 127)
 }
 
 /// Where a subgrid sits in its grid, to place crossings in grid coordinates.
@@ -64,15 +71,16 @@ impl Placement {
     pub fn locate(&self, sub: &Subgrid, level: f32, at: Crossing) -> (f32, f32) {
         let xc = self.x0 + 0.5;
         let yc = self.y0 + 0.5;
-        match at {
-            Crossing::Node(n) => match n {
+        match (at.as_node(), at.as_edge()) {
+            (Some(n), _) => match n {
                 Node::LL => (self.x0, self.y0),
                 Node::LR => (self.x1, self.y0),
                 Node::UR => (self.x1, self.y1),
                 Node::UL => (self.x0, self.y1),
                 Node::C => (xc, yc),
             },
-            Crossing::Edge(e) => {
+            (None, None) => (xc, yc),
+            (None, Some(e)) => {
                 let t = sub.crossing(e, level);
                 match e {
                     Edge::B0 => (self.x0 + t, self.y0),
@@ -153,10 +161,87 @@ impl Pen {
         let mut points = self.lone & !self.lined;
         while points != 0 {
             let i = points.trailing_zeros();
-            out(Command::Point(from_bit(i)))?;
+            if let Some(x) = Crossing::from_index(i as usize) {
+                out(Command::Point(x))?;
+            }
             points &= points - 1;
         }
         self.lone = 0;
         Ok(())
+    }
+}
+
+/// The second, placed stage of the pen: it sees commands with their grid
+/// coordinates. Distinct crossings within about one ULP of a node round to
+/// the same `f32` point, so a line can still have zero length once placed; it
+/// is dropped, and a polyline that collapses entirely becomes a point. A
+/// SETPOINT to where the beam already is continues the polyline instead of
+/// starting a new one.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Placed {
+    at: Option<(f32, f32)>,
+    held: Option<(f32, f32)>,
+}
+
+impl Placed {
+    /// Nothing drawn yet.
+    pub const fn new() -> Self {
+        Self { at: None, held: None }
+    }
+
+    /// Take one placed command; `out` receives what should be drawn.
+    #[inline]
+    pub fn step<E>(
+        &mut self,
+        c: Command<(f32, f32)>,
+        mut out: impl FnMut(Command<(f32, f32)>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        match c {
+            Command::MoveTo(p) => {
+                if self.held.is_some() || self.at != Some(p) {
+                    self.collapse(&mut out)?;
+                    self.held = Some(p);
+                }
+                self.at = Some(p);
+            }
+            Command::LineTo(p) => {
+                if self.at != Some(p) {
+                    if let Some(m) = self.held.take() {
+                        out(Command::MoveTo(m))?;
+                    } else if self.at.is_none() {
+                        // A line with no start: draw it as its end point.
+                        return self.step(Command::MoveTo(p), out);
+                    }
+                    out(Command::LineTo(p))?;
+                    self.at = Some(p);
+                }
+            }
+            Command::Point(p) => {
+                self.collapse(&mut out)?;
+                out(Command::Point(p))?;
+                self.at = None;
+            }
+        }
+        Ok(())
+    }
+
+    /// End of the subgrid.
+    #[inline]
+    pub fn finish<E>(&mut self, mut out: impl FnMut(Command<(f32, f32)>) -> Result<(), E>) -> Result<(), E> {
+        self.collapse(&mut out)?;
+        self.at = None;
+        Ok(())
+    }
+
+    /// A held SETPOINT whose lines all had zero length is a point.
+    #[inline]
+    fn collapse<E>(&mut self, out: &mut impl FnMut(Command<(f32, f32)>) -> Result<(), E>) -> Result<(), E> {
+        match self.held.take() {
+            Some(m) => {
+                self.at = None;
+                out(Command::Point(m))
+            }
+            None => Ok(()),
+        }
     }
 }

@@ -194,7 +194,9 @@ impl DirectionCode {
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Subgrid {
-    values: [f32; 5],
+    /// LL, LR, UR, UL, C, padded to eight so that a masked index needs no
+    /// bounds check.
+    values: [f32; 8],
 }
 
 /// Why a subgrid could not be formed.
@@ -239,25 +241,25 @@ impl Subgrid {
         let c = (ll * 0.25 + lr * 0.25) + (ur * 0.25 + ul * 0.25);
         let lo = ll.min(lr).min(ur.min(ul));
         let hi = ll.max(lr).max(ur.max(ul));
-        Self { values: [ll, lr, ur, ul, c.max(lo).min(hi)] }
+        Self { values: [ll, lr, ur, ul, c.max(lo).min(hi), 0.0, 0.0, 0.0] }
     }
 
     /// The value at a node.
     #[inline(always)]
     pub fn value(&self, node: Node) -> f32 {
-        let [ll, lr, ur, ul, c] = self.values;
-        match node {
-            Node::LL => ll,
-            Node::LR => lr,
-            Node::UR => ur,
-            Node::UL => ul,
-            Node::C => c,
-        }
+        self.at(node as usize)
+    }
+
+    /// The value at node index `i` (0..5).
+    #[inline(always)]
+    pub(crate) fn at(&self, i: usize) -> f32 {
+        self.values.get(i & 7).copied().unwrap_or(f32::NAN)
     }
 
     /// All five values, indexed by [`Node::index`].
     pub fn values(&self) -> [f32; 5] {
-        self.values
+        let [ll, lr, ur, ul, c, ..] = self.values;
+        [ll, lr, ur, ul, c]
     }
 
     /// True when all four corners are equal (the paper draws nothing then).

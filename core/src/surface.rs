@@ -6,10 +6,13 @@
 //! x-y, x-z and y-z contours meet exactly.
 
 use crate::command::{Command, CommandSink, Point3};
-use crate::contour::{ContourError, ContourStats, check_levels, contour_grid};
+use crate::contour::{ContourError, ContourStats, check_levels, contour_grid, contour_rows};
 use crate::grid::{Plane, Planes, Volume};
+use crate::pen::Placement;
 use crate::sample::Sample;
+use crate::sweep::{BLOCK, Layout, Rows, Sweep, gather};
 use crate::trace::Traversal;
+use core::ops::Range;
 
 /// One slice of a volume.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -74,9 +77,108 @@ pub fn contour_slice<T: Sample, S: SurfaceSink>(
     contour_grid(&grid, levels, traversal, |u, v| plane.to_voxel(s, u, v), &mut adapter)
 }
 
+/// The number of cell rows of `plane`'s slices (along the slice's second
+/// axis: y for XY, z for XZ and YZ); bands passed to [`contour_band`] index
+/// these rows.
+pub fn band_rows<T: Sample>(volume: &Volume<'_, T>, plane: Plane) -> usize {
+    let (_, ny, nz) = volume.dims();
+    match plane {
+        Plane::XY => ny - 1,
+        Plane::XZ | Plane::YZ => nz - 1,
+    }
+}
+
+/// Contour cell rows `rows` (see [`band_rows`]) of every slice of `plane`.
+///
+/// Within each slice, commands come in row-major cell order, exactly as
+/// [`contour_slice`] gives them, so splitting a plane into bands and joining
+/// each slice's commands band by band reproduces the slice. Across slices the
+/// order follows memory: x-y and x-z slices one after the other, y-z slices
+/// interleaved, swept with x innermost so that every sample is read from
+/// contiguous memory (a y-z slice alone strides through the whole volume).
+///
+/// # Errors
+/// [`ContourError::NonFiniteLevel`] before anything is drawn, or the sink's
+/// error. Rows past the end are ignored.
+pub fn contour_band<T: Sample, S: SurfaceSink>(
+    volume: &Volume<'_, T>,
+    plane: Plane,
+    rows: Range<usize>,
+    levels: &[f32],
+    traversal: Traversal,
+    sink: &mut S,
+) -> Result<ContourStats, ContourError<S::Error>> {
+    check_levels(levels)?;
+    let rows = rows.start..rows.end.min(band_rows(volume, plane));
+    if plane != Plane::YZ {
+        let mut stats = ContourStats::default();
+        for index in 0..volume.slice_count(plane) {
+            let slice = SliceId { plane, index };
+            let grid = volume.slice(plane, index).map_err(ContourError::Grid)?;
+            let s = index as f32;
+            let mut adapter = SliceSink { sink, slice };
+            let place = |u, v| plane.to_voxel(s, u, v);
+            stats += contour_rows(&grid, rows.clone(), levels, traversal, place, &mut adapter)?;
+        }
+        return Ok(stats);
+    }
+    // y-z slices, x innermost: cell (y, z) of slice x has its corners in four
+    // contiguous x rows.
+    let (nx, ny, _) = volume.dims();
+    let data = volume.data();
+    let sweep = Sweep::new(levels, traversal);
+    let mut stats = ContourStats::default();
+    let mut lanes = Rows::new();
+    let mut adapter = LaneSink { sink };
+    let rows_len = rows.len();
+    for z in rows {
+        for y in 0..ny - 1 {
+            let row = |y: usize, z: usize| (z * ny + y) * nx;
+            let mut x0 = 0;
+            while x0 < nx {
+                let n = (nx - x0).min(BLOCK);
+                let [v0, v1, v2, v3] = &mut lanes.v;
+                gather(data, row(y, z) + x0, 1, v0.get_mut(..n).unwrap_or(&mut []));
+                gather(data, row(y + 1, z) + x0, 1, v1.get_mut(..n).unwrap_or(&mut []));
+                gather(data, row(y + 1, z + 1) + x0, 1, v2.get_mut(..n).unwrap_or(&mut []));
+                gather(data, row(y, z + 1) + x0, 1, v3.get_mut(..n).unwrap_or(&mut []));
+                sweep
+                    .run(
+                        &mut lanes,
+                        Layout::FourLanes,
+                        n,
+                        |_| Placement::new(y, z),
+                        |k, u, v| (x0 + k, Point3::new((x0 + k) as f32, u, v)),
+                        &mut adapter,
+                        &mut stats,
+                    )
+                    .map_err(ContourError::Sink)?;
+                x0 += n;
+            }
+        }
+    }
+    stats.cells = (nx * (ny - 1) * rows_len) as u64;
+    Ok(stats)
+}
+
+/// Forwards y-z commands, whose points carry their slice (x) index.
+struct LaneSink<'s, S> {
+    sink: &'s mut S,
+}
+
+impl<S: SurfaceSink> CommandSink<(usize, Point3)> for LaneSink<'_, S> {
+    type Error = S::Error;
+    #[inline(always)]
+    fn command(&mut self, level: usize, command: Command<(usize, Point3)>) -> Result<(), S::Error> {
+        let index = command.point().0;
+        self.sink.command(SliceId { plane: Plane::YZ, index }, level, command.map(|(_, p)| p))
+    }
+}
+
 /// Contour every slice of every plane in `planes` at every level: the
-/// chicken-wire contour surface. Slices go plane by plane (`xy, xz, yz`),
-/// in increasing index.
+/// chicken-wire contour surface. Planes go in `xy, xz, yz` order; within
+/// each slice commands come in row-major cell order (see [`contour_band`]
+/// for the order across slices).
 ///
 /// # Errors
 /// [`ContourError::NonFiniteLevel`] before anything is drawn, or the sink's
@@ -91,9 +193,7 @@ pub fn contour_volume<T: Sample, S: SurfaceSink>(
     check_levels(levels)?;
     let mut stats = ContourStats::default();
     for plane in planes.iter() {
-        for index in 0..volume.slice_count(plane) {
-            stats += contour_slice(volume, SliceId { plane, index }, levels, traversal, sink)?;
-        }
+        stats += contour_band(volume, plane, 0..band_rows(volume, plane), levels, traversal, sink)?;
     }
     Ok(stats)
 }

@@ -20,6 +20,7 @@
 //! MCU (see [`TEMPLATE_TABLE_BYTES`]). Traversal is in [`crate::trace`].
 
 use crate::subgrid::{DirectionCode, Edge, Node};
+use crate::trace::Crossing;
 
 /// Most trees in one subgrid (two, for a saddle).
 pub const MAX_TREES: usize = 2;
@@ -34,6 +35,8 @@ pub const MAX_ENTRIES: usize = MAX_TREES * 9;
 pub struct Entry {
     node: u8,
     parent: u8,
+    /// [`Crossing`] key of the tree edge (the node's own key for a root).
+    crossing: u8,
     end: u8,
     /// bit 0: first copy of a sink node in its tree; bits 3..8: nodes met
     /// earlier in the tree's pre-order.
@@ -41,7 +44,7 @@ pub struct Entry {
 }
 
 impl Entry {
-    const EMPTY: Entry = Entry { node: 0, parent: 0, end: 0, flags: 0 };
+    const EMPTY: Entry = Entry { node: 0, parent: 0, crossing: 0, end: 0, flags: 0 };
 
     /// The grid node this entry is a copy of.
     #[inline(always)]
@@ -56,6 +59,12 @@ impl Entry {
         node_of(self.parent)
     }
 
+    /// Index of [`Entry::node`] (0..5).
+    #[inline(always)]
+    pub(crate) fn node_index(&self) -> usize {
+        usize::from(self.node)
+    }
+
     /// True for a tree's root.
     #[inline(always)]
     pub fn is_root(&self) -> bool {
@@ -66,6 +75,13 @@ impl Entry {
     #[inline(always)]
     pub fn edge(&self) -> Option<Edge> {
         Edge::between(self.parent(), self.node())
+    }
+
+    /// The crossing of the tree edge from the parent when the level lies
+    /// strictly inside it (the node itself for a root).
+    #[inline(always)]
+    pub fn crossing(&self) -> Crossing {
+        Crossing::from_index(usize::from(self.crossing)).unwrap_or(Crossing::node(Node::C))
     }
 
     /// Index one past this entry's subtree in the template's entry array.
@@ -109,6 +125,11 @@ pub struct Template {
     /// Tree `t` spans entries `[start(t), tree_end[t])`.
     tree_end: [u8; MAX_TREES],
     trees: u8,
+    /// Bit `i` of `node_at[n]` is set when entry `i` is a copy of node `n`.
+    node_at: [u32; 5],
+    /// Bit `i` of `parent_at[n]` is set when entry `i` hangs below node `n`
+    /// (roots excluded).
+    parent_at: [u32; 5],
 }
 
 impl Template {
@@ -131,6 +152,29 @@ impl Template {
         self.entries.get(..usize::from(n)).unwrap_or(&[])
     }
 
+    /// The entries whose tree edge contains the level, as a bit set over
+    /// entry indices, given the nodes at or below the level (`below`, bit
+    /// `n` for node `n`). Roots are not included.
+    #[inline(always)]
+    pub fn crossing_entries(&self, below: u8) -> u32 {
+        let mut nodes = 0;
+        let mut parents = 0;
+        for (n, (&a, &p)) in self.node_at.iter().zip(&self.parent_at).enumerate() {
+            if below & (1 << n) != 0 {
+                nodes |= a;
+            } else {
+                parents |= p;
+            }
+        }
+        nodes & parents
+    }
+
+    /// Index one past the last entry of the first tree.
+    #[inline(always)]
+    pub(crate) fn first_tree_end(&self) -> usize {
+        usize::from(self.tree_end[0])
+    }
+
     /// The entry index range of tree `t` (empty past the last tree).
     #[inline(always)]
     pub fn tree_range(&self, t: usize) -> core::ops::Range<usize> {
@@ -143,8 +187,13 @@ impl Template {
     }
 }
 
-static EMPTY: Template =
-    Template { entries: [Entry::EMPTY; MAX_ENTRIES], tree_end: [0; MAX_TREES], trees: 0 };
+static EMPTY: Template = Template {
+    entries: [Entry::EMPTY; MAX_ENTRIES],
+    tree_end: [0; MAX_TREES],
+    trees: 0,
+    node_at: [0; 5],
+    parent_at: [0; 5],
+};
 
 // The builder below runs at compile time only (for `TEMPLATES`): an index out
 // of range there is a build error, never a run-time panic.
@@ -200,7 +249,14 @@ struct Builder {
 #[allow(clippy::indexing_slicing)]
 const fn dfs(b: &mut Builder, out: &[u8; 5], removed: u8, node: u8, parent: u8) {
     let idx = b.len;
-    b.entries[idx] = Entry { node, parent, end: 0, flags: 0 };
+    let crossing = match (Node::from_index(parent as usize), Node::from_index(node as usize)) {
+        (Some(p), Some(n)) => match Edge::between(p, n) {
+            Some(e) => Crossing::edge(e).index() as u8,
+            None => node,
+        },
+        _ => node,
+    };
+    b.entries[idx] = Entry { node, parent, crossing, end: 0, flags: 0 };
     b.len += 1;
     if b.expanded & (1 << node) == 0 {
         b.expanded |= 1 << node;
@@ -275,7 +331,18 @@ const fn build(code: u8) -> Template {
         }
         r += 1;
     }
-    Template { entries: b.entries, tree_end, trees: trees as u8 }
+    let mut node_at = [0u32; 5];
+    let mut parent_at = [0u32; 5];
+    let mut i = 0;
+    while i < b.len {
+        let e = b.entries[i];
+        node_at[e.node as usize] |= 1 << i;
+        if e.node != e.parent {
+            parent_at[e.parent as usize] |= 1 << i;
+        }
+        i += 1;
+    }
+    Template { entries: b.entries, tree_end, trees: trees as u8, node_at, parent_at }
 }
 
 #[allow(clippy::indexing_slicing)]

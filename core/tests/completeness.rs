@@ -233,12 +233,15 @@ fn every_crossing_is_on_an_edge_that_spans_the_level() {
     for (c, k) in cases() {
         let sub = Subgrid::new(c[0], c[1], c[2], c[3]).unwrap();
         let v = sub.values();
-        visit(&sub, Template::for_code(sub.code()), k, Traversal::Corrected, |_: Conn, x| match x {
-            Crossing::Node(n) => assert_eq!(v[n.index()], k),
-            Crossing::Edge(e) => {
-                let (a, b) = e.canonical();
-                let (va, vb) = (v[a.index()], v[b.index()]);
-                assert!(va.min(vb) < k && k < va.max(vb), "{c:?} {k} {e:?}");
+        visit(&sub, Template::for_code(sub.code()), k, Traversal::Corrected, |_: Conn, x: Crossing| {
+            match (x.as_node(), x.as_edge()) {
+                (Some(n), None) => assert_eq!(v[n.index()], k),
+                (None, Some(e)) => {
+                    let (a, b) = e.canonical();
+                    let (va, vb) = (v[a.index()], v[b.index()]);
+                    assert!(va.min(vb) < k && k < va.max(vb), "{c:?} {k} {e:?}");
+                }
+                _ => panic!("{x:?} is neither a node nor an edge"),
             }
         });
     }

@@ -5,12 +5,12 @@
 //! slice order so the output is the same for any thread count.
 
 use crate::progress::Progress;
-use anyhow::{Result, anyhow};
+use anyhow::{Context, Result, anyhow};
 use isoscope_core::command::{Command, Point3};
 use isoscope_core::contour::ContourStats;
 use isoscope_core::grid::{Plane, Volume};
 use isoscope_core::sample::Sample;
-use isoscope_core::surface::{SliceId, SurfaceSink, contour_slice};
+use isoscope_core::surface::{SliceId, SurfaceSink, band_rows, contour_band};
 use isoscope_core::trace::Traversal;
 use std::convert::Infallible;
 use std::io::Write;
@@ -47,13 +47,14 @@ pub struct Job<'a> {
     pub keep: bool,
 }
 
-struct Keep<'v>(&'v mut SliceCommands);
+/// Keeps a band's commands with their slice.
+struct Keep<'v>(&'v mut Vec<(SliceId, u32, Command<Point3>)>);
 
 impl SurfaceSink for Keep<'_> {
     type Error = Infallible;
     #[inline]
-    fn command(&mut self, _: SliceId, level: usize, c: Command<Point3>) -> Result<(), Infallible> {
-        self.0.push((level as u32, c));
+    fn command(&mut self, slice: SliceId, level: usize, c: Command<Point3>) -> Result<(), Infallible> {
+        self.0.push((slice, level as u32, c));
         Ok(())
     }
 }
@@ -68,7 +69,33 @@ impl SurfaceSink for Discard {
     }
 }
 
-/// Contour every slice of the job's planes, on `job.threads` threads.
+/// One unit of parallel work: a band of cell rows across every slice of a
+/// plane.
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct Band {
+    plane: Plane,
+    rows: std::ops::Range<usize>,
+}
+
+/// Rows per band: small enough to balance the threads, large enough that
+/// a band is worth a task.
+fn bands<T: Sample>(volume: &Volume<'_, T>, planes: &[Plane], threads: usize) -> Vec<Band> {
+    let mut out = vec![];
+    for &plane in planes {
+        let rows = band_rows(volume, plane);
+        let per = rows.div_ceil(8 * threads).max(1);
+        let mut r = 0;
+        while r < rows {
+            out.push(Band { plane, rows: r..(r + per).min(rows) });
+            r += per;
+        }
+    }
+    out
+}
+
+/// Contour every slice of the job's planes on `job.threads` threads. The
+/// result is the same for any thread count: each slice's commands in
+/// row-major cell order, slices in plane and index order.
 pub fn contour_volume<T: Sample + Sync>(
     volume: &Volume<'_, T>,
     job: &Job<'_>,
@@ -77,27 +104,24 @@ pub fn contour_volume<T: Sample + Sync>(
     if let Some(i) = job.levels.iter().position(|l| !l.is_finite()) {
         return Err(anyhow!("contour level #{} ({}) is not a finite number", i + 1, job.levels[i]));
     }
-    let slices: Vec<SliceId> = job
-        .planes
-        .iter()
-        .flat_map(|&plane| (0..volume.slice_count(plane)).map(move |index| SliceId { plane, index }))
-        .collect();
-    let results: Vec<Mutex<Option<(SliceCommands, ContourStats)>>> =
-        slices.iter().map(|_| Mutex::new(None)).collect();
+    let threads = job.threads.max(1);
+    let bands = bands(volume, job.planes, threads);
+    type BandResult = (Vec<(SliceId, u32, Command<Point3>)>, ContourStats);
+    let results: Vec<Mutex<Option<BandResult>>> = bands.iter().map(|_| Mutex::new(None)).collect();
     let next = AtomicUsize::new(0);
-    let threads = job.threads.clamp(1, slices.len().max(1));
     let start = Instant::now();
     let worker = || -> Result<()> {
         loop {
             let i = next.fetch_add(1, Ordering::Relaxed);
-            let Some(&slice) = slices.get(i) else { return Ok(()) };
-            let mut cmds = SliceCommands::new();
+            let Some(band) = bands.get(i) else { return Ok(()) };
+            let mut cmds = Vec::new();
+            let (levels, traversal) = (job.levels, job.traversal);
             let stats = if job.keep {
-                contour_slice(volume, slice, job.levels, job.traversal, &mut Keep(&mut cmds))
+                contour_band(volume, band.plane, band.rows.clone(), levels, traversal, &mut Keep(&mut cmds))
             } else {
-                contour_slice(volume, slice, job.levels, job.traversal, &mut Discard)
+                contour_band(volume, band.plane, band.rows.clone(), levels, traversal, &mut Discard)
             }
-            .map_err(|e| anyhow!("slice {} {}: {e}", slice.plane, slice.index))?;
+            .map_err(|e| anyhow!("{} rows {:?}: {e}", band.plane, band.rows))?;
             *results[i].lock().map_err(|_| anyhow!("a worker thread panicked"))? = Some((cmds, stats));
             if let Some(p) = progress {
                 p.inc();
@@ -105,23 +129,42 @@ pub fn contour_volume<T: Sample + Sync>(
         }
     };
     std::thread::scope(|s| {
-        let handles: Vec<_> = (0..threads).map(|_| s.spawn(worker)).collect();
+        let handles: Vec<_> = (0..threads.min(bands.len()).max(1)).map(|_| s.spawn(worker)).collect();
         handles
             .into_iter()
             .map(|h| h.join().map_err(|_| anyhow!("a worker thread panicked"))?)
             .collect::<Result<Vec<()>>>()
     })?;
     let seconds = start.elapsed().as_secs_f64();
+    // Join each slice's commands band by band.
     let mut out = Contoured { seconds, ..Default::default() };
-    for (slice, r) in slices.into_iter().zip(results) {
+    let mut first_of_plane = std::collections::HashMap::new();
+    for &plane in job.planes {
+        first_of_plane.insert(plane, out.slices.len());
+        for index in 0..volume.slice_count(plane) {
+            out.slices.push((SliceId { plane, index }, Vec::new()));
+        }
+    }
+    for r in results {
         let (cmds, stats) = r
             .into_inner()
             .map_err(|_| anyhow!("a worker thread panicked"))?
-            .ok_or_else(|| anyhow!("slice {} {} was not contoured", slice.plane, slice.index))?;
+            .context("a band was not contoured")?;
         out.stats += stats;
-        out.slices.push((slice, cmds));
+        for (slice, level, c) in cmds {
+            let at = first_of_plane.get(&slice.plane).copied().unwrap_or(0) + slice.index;
+            if let Some((_, v)) = out.slices.get_mut(at) {
+                v.push((level, c));
+            }
+        }
     }
     Ok(out)
+}
+
+/// The number of work units [`contour_volume`] splits a job into (for
+/// progress reporting).
+pub fn work_units<T: Sample>(volume: &Volume<'_, T>, planes: &[Plane], threads: usize) -> usize {
+    bands(volume, planes, threads.max(1)).len()
 }
 
 /// Write commands as CSV: a header, then one command per line,

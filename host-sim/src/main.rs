@@ -5,7 +5,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use isoscope_core::grid::{Plane, Volume};
 use isoscope_core::sample::Sample;
 use isoscope_core::trace::Traversal;
-use isoscope_sim::contour::{Job, contour_volume, write_csv};
+use isoscope_sim::contour::{Job, contour_volume, work_units, write_csv};
 use isoscope_sim::progress::Progress;
 use isoscope_sim::volume::{DemoSpec, Dims, Dtype, LoadedVolume, Samples};
 use std::io::Write;
@@ -152,8 +152,7 @@ fn contour(args: &ContourArgs) -> Result<()> {
         job: &Job<'_>,
     ) -> Result<isoscope_sim::contour::Contoured> {
         let v = Volume::new(data, d.0, d.1, d.2)?;
-        let total = job.planes.iter().map(|&p| v.slice_count(p)).sum();
-        let progress = Progress::new("contouring slices", total);
+        let progress = Progress::new("contouring", work_units(&v, job.planes, job.threads));
         contour_volume(&v, job, Some(&progress))
     }
     let d = (nx, ny, nz);
