@@ -19,6 +19,33 @@
 //!
 //! No `alloc`, no `unsafe`, no panics on any input; all float maths goes
 //! through `libm` so the host and the MCU compute the same numbers.
+//!
+//! ```
+//! use isoscope_core::command::{Command, CommandSink, Point2};
+//! use isoscope_core::contour::contour_grid;
+//! use isoscope_core::grid::Grid2;
+//! use isoscope_core::trace::Traversal;
+//!
+//! /// A heap-free sink: the first 16 commands.
+//! struct First16 { cmds: [Option<Command<Point2>>; 16], n: usize }
+//! impl CommandSink<Point2> for First16 {
+//!     type Error = Command<Point2>; // hands the command back when full
+//!     fn command(&mut self, _level: usize, c: Command<Point2>) -> Result<(), Self::Error> {
+//!         let slot = self.cmds.get_mut(self.n).ok_or(c)?;
+//!         *slot = Some(c);
+//!         self.n += 1;
+//!         Ok(())
+//!     }
+//! }
+//!
+//! // The paper's Figure 5 subgrid: rows (LL, LR), (UL, UR).
+//! let samples = [150u8, 40, 30, 60];
+//! let grid = Grid2::new(&samples, 2, 2).unwrap();
+//! let mut sink = First16 { cmds: [None; 16], n: 0 };
+//! let stats = contour_grid(&grid, &[100.0], Traversal::Corrected, Point2::new, &mut sink).unwrap();
+//! assert_eq!(stats.commands, 3);
+//! assert!(matches!(sink.cmds[0], Some(Command::MoveTo(p)) if (p.x - 0.4545).abs() < 1e-4 && p.y == 0.0));
+//! ```
 #![cfg_attr(not(test), no_std)]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]

@@ -239,9 +239,12 @@ impl Subgrid {
     #[inline(always)]
     pub(crate) fn from_finite(ll: f32, lr: f32, ur: f32, ul: f32) -> Self {
         let c = (ll * 0.25 + lr * 0.25) + (ur * 0.25 + ul * 0.25);
-        let lo = ll.min(lr).min(ur.min(ul));
-        let hi = ll.max(lr).max(ur.max(ul));
-        Self { values: [ll, lr, ur, ul, c.max(lo).min(hi), 0.0, 0.0, 0.0] }
+        // Finite inputs: plain comparisons suffice (no NaN to propagate).
+        let min = |a: f32, b: f32| if a < b { a } else { b };
+        let max = |a: f32, b: f32| if a > b { a } else { b };
+        let lo = min(min(ll, lr), min(ur, ul));
+        let hi = max(max(ll, lr), max(ur, ul));
+        Self { values: [ll, lr, ur, ul, min(max(c, lo), hi), 0.0, 0.0, 0.0] }
     }
 
     /// The value at a node.

@@ -39,26 +39,42 @@ pub(crate) fn gather<T: Sample>(data: &[T], start: usize, stride: usize, out: &m
     }
 }
 
-/// Class bits of each sample: 1 when above `khi`, 2 when below `klo`, 0
-/// otherwise (between, equal to a bound, or non-finite).
+/// `min` and `max` without NaN handling (one instruction each); NaN is
+/// caught separately by the sum.
 #[inline(always)]
-fn classify(v: &[f32], class: &mut [u8], klo: f32, khi: f32) {
-    let inf = f32::INFINITY;
-    for (c, &x) in class.iter_mut().zip(v) {
-        *c = u8::from((x > khi) & (x < inf)) | (u8::from((x < klo) & (x > -inf)) << 1);
+fn min2(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
+}
+
+#[inline(always)]
+fn max2(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
+/// Mark the cells (corners in four lanes) that may meet a level in
+/// `[klo, khi]`: not all corners above `khi`, not all below `klo`, or a
+/// corner that is not finite (the corner sum is then NaN or infinite; a sum
+/// that overflows from finite corners only sends the cell the slow way).
+#[inline(always)]
+fn mark(out: &mut [u8], [a, b, c, d]: [&[f32]; 4], klo: f32, khi: f32) {
+    for ((((o, &a), &b), &c), &d) in out.iter_mut().zip(a).zip(b).zip(c).zip(d) {
+        let lo = min2(min2(a, b), min2(c, d));
+        let hi = max2(max2(a, b), max2(c, d));
+        let sum = (a + b) + (c + d);
+        let quiet = (lo > khi) | (hi < klo);
+        *o = u8::from(!quiet | !sum.is_finite());
     }
 }
 
 /// Row buffers for one block: sample values and their classes.
 pub(crate) struct Rows {
     pub v: [[f32; BLOCK + 1]; 4],
-    c: [[u8; BLOCK + 1]; 4],
-    shared: [u8; BLOCK],
+    busy: [u8; BLOCK],
 }
 
 impl Rows {
     pub(crate) const fn new() -> Self {
-        Self { v: [[0.0; BLOCK + 1]; 4], c: [[0; BLOCK + 1]; 4], shared: [0; BLOCK] }
+        Self { v: [[0.0; BLOCK + 1]; 4], busy: [0; BLOCK] }
     }
 }
 
@@ -105,30 +121,22 @@ impl<'l> Sweep<'l> {
         stats: &mut ContourStats,
     ) -> Result<(), S::Error> {
         let n = n.min(BLOCK);
+        let [v0, v1, v2, v3] = &rows.v;
+        fn lane(v: &[f32; BLOCK + 1], from: usize, n: usize) -> &[f32] {
+            v.get(from..from + n).unwrap_or(&[])
+        }
         let lanes = match layout {
-            Layout::TwoRows => 2,
-            Layout::FourLanes => 4,
+            Layout::TwoRows => [lane(v0, 0, n), lane(v0, 1, n), lane(v1, 1, n), lane(v1, 0, n)],
+            Layout::FourLanes => [lane(v0, 0, n), lane(v1, 0, n), lane(v2, 0, n), lane(v3, 0, n)],
         };
-        let width = if layout == Layout::TwoRows { n + 1 } else { n };
-        for (v, c) in rows.v.iter().zip(rows.c.iter_mut()).take(lanes) {
-            classify(v.get(..width).unwrap_or(&[]), c, self.klo, self.khi);
-        }
-        // Cells whose four corners share a class bit are skipped.
-        let [c0, c1, c2, c3] = &rows.c;
-        let (a, b, c, d): (&[u8], &[u8], &[u8], &[u8]) = match layout {
-            Layout::TwoRows => (c0, c0.get(1..).unwrap_or(&[]), c1.get(1..).unwrap_or(&[]), c1),
-            Layout::FourLanes => (c0, c1, c2, c3),
-        };
-        for (s, (((&a, &b), &c), &d)) in rows.shared.iter_mut().zip(a.iter().zip(b).zip(c).zip(d)) {
-            *s = a & b & c & d;
-        }
-        let shared = rows.shared.get(..n).unwrap_or(&[]);
-        for (g, group) in shared.chunks(16).enumerate() {
-            if group.iter().fold(u8::MAX, |m, &x| m.min(x)) != 0 {
+        mark(&mut rows.busy, lanes, self.klo, self.khi);
+        let busy = rows.busy.get(..n).unwrap_or(&[]);
+        for (g, group) in busy.chunks(16).enumerate() {
+            if group.iter().fold(0, |m, &x| m | x) == 0 {
                 continue;
             }
-            for (k, &s) in group.iter().enumerate() {
-                if s != 0 {
+            for (k, &b) in group.iter().enumerate() {
+                if b == 0 {
                     continue;
                 }
                 let k = g * 16 + k;
@@ -158,10 +166,11 @@ impl<'l> Sweep<'l> {
             stats.nonfinite_cells += 1;
             return Ok(());
         }
-        let lo = a.min(b).min(c.min(d));
-        let hi = a.max(b).max(c.max(d));
-        // A constant subgrid draws nothing; the levels may straddle the cell.
-        if lo == hi || !self.levels.iter().any(|&l| lo <= l && l <= hi) {
+        let lo = min2(min2(a, b), min2(c, d));
+        let hi = max2(max2(a, b), max2(c, d));
+        // A constant subgrid draws nothing; several levels may straddle the
+        // cell (one level meets it, or the marking would have skipped it).
+        if lo == hi || (self.levels.len() > 1 && !self.levels.iter().any(|&l| lo <= l && l <= hi)) {
             return Ok(());
         }
         let sub = Subgrid::from_finite(a, b, c, d);

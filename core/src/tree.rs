@@ -160,11 +160,9 @@ impl Template {
         let mut nodes = 0;
         let mut parents = 0;
         for (n, (&a, &p)) in self.node_at.iter().zip(&self.parent_at).enumerate() {
-            if below & (1 << n) != 0 {
-                nodes |= a;
-            } else {
-                parents |= p;
-            }
+            let is_below = 0u32.wrapping_sub(u32::from(below >> n) & 1);
+            nodes |= a & is_below;
+            parents |= p & !is_below;
         }
         nodes & parents
     }
@@ -362,3 +360,133 @@ pub static TEMPLATES: [Template; 256] = build_all();
 
 /// Bytes the template table occupies (in flash on the MCU).
 pub const TEMPLATE_TABLE_BYTES: usize = core::mem::size_of::<[Template; 256]>();
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::subgrid::Subgrid;
+    use std::collections::BTreeSet;
+
+    /// The construction written again, independently: angles by `atan2`,
+    /// recursion over a `Vec`, the other root removed by filtering.
+    fn reference(code: u8) -> Vec<Vec<(usize, usize, bool, u8)>> {
+        let pos =
+            |n: usize| -> (f64, f64) { [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0), (0.5, 0.5)][n] };
+        let angle = |a: usize, b: usize| {
+            let (pa, pb) = (pos(a), pos(b));
+            (pb.1 - pa.1).atan2(pb.0 - pa.0).rem_euclid(std::f64::consts::TAU)
+        };
+        let mut edges = vec![];
+        for e in Edge::ALL {
+            let (f, t) = DirectionCode(code).directed(e);
+            edges.push((f.index(), t.index()));
+        }
+        let indeg = |n: usize| edges.iter().filter(|e| e.1 == n).count();
+        let roots: Vec<usize> = (0..5).filter(|&n| indeg(n) == 0).collect();
+        let mut trees = vec![];
+        for &r in &roots {
+            let mut out = vec![];
+            let mut expanded = BTreeSet::new();
+            #[allow(clippy::too_many_arguments)]
+            fn go(
+                n: usize,
+                p: usize,
+                start: f64,
+                edges: &[(usize, usize)],
+                removed: &[usize],
+                angle: &dyn Fn(usize, usize) -> f64,
+                expanded: &mut BTreeSet<usize>,
+                out: &mut Vec<(usize, usize)>,
+            ) {
+                out.push((n, p));
+                if !expanded.insert(n) {
+                    return;
+                }
+                let mut kids: Vec<usize> =
+                    edges.iter().filter(|e| e.0 == n && !removed.contains(&e.1)).map(|e| e.1).collect();
+                // Counterclockwise from just past `start`.
+                kids.sort_by(|&a, &b| {
+                    let ka = (angle(n, a) - start - 1e-9).rem_euclid(std::f64::consts::TAU);
+                    let kb = (angle(n, b) - start - 1e-9).rem_euclid(std::f64::consts::TAU);
+                    ka.total_cmp(&kb)
+                });
+                for k in kids {
+                    go(k, n, angle(k, n), edges, removed, angle, expanded, out);
+                }
+            }
+            let removed: Vec<usize> = roots.iter().copied().filter(|&x| x != r).collect();
+            let start = if r == 4 { -1e-6 } else { angle(4, r) - 1e-6 };
+            let mut seq = vec![];
+            go(r, r, start, &edges, &removed, &angle, &mut expanded, &mut seq);
+            let sinks: BTreeSet<usize> = (0..5).filter(|&n| !edges.iter().any(|e| e.0 == n)).collect();
+            let mut seen = 0u8;
+            for (n, p) in seq {
+                let first_sink = sinks.contains(&n) && seen & (1 << n) == 0;
+                out.push((n, p, first_sink, seen));
+                seen |= 1 << n;
+            }
+            trees.push(out);
+        }
+        trees
+    }
+
+    #[test]
+    fn table_matches_an_independent_construction_for_all_256_codes() {
+        for code in 0..=255u8 {
+            let t = Template::for_code(DirectionCode(code));
+            let want = reference(code);
+            assert_eq!(t.tree_count(), want.len(), "code {code:#010b}");
+            for (ti, tree) in want.iter().enumerate() {
+                let got: Vec<_> = t.entries()[t.tree_range(ti)]
+                    .iter()
+                    .map(|e| (e.node().index(), e.parent().index(), e.is_first_sink(), e.earlier()))
+                    .collect();
+                assert_eq!(&got, tree, "code {code:#010b} tree {ti}");
+            }
+            // Subtree ends nest properly and each tree edge is a graph edge.
+            for r in 0..t.tree_count() {
+                let range = t.tree_range(r);
+                for i in range.clone() {
+                    let e = t.entries()[i];
+                    assert!(e.subtree_end() > i && e.subtree_end() <= range.end);
+                    if !e.is_root() {
+                        let edge = Edge::between(e.parent(), e.node()).unwrap();
+                        assert_eq!(DirectionCode(code).directed(edge), (e.parent(), e.node()));
+                        assert_eq!(e.crossing().as_edge(), Some(edge));
+                    }
+                }
+            }
+        }
+    }
+
+    /// Over every subgrid with corners in {0..6}^4 (all orderings and ties):
+    /// which codes occur, how many trees and entries they need.
+    #[test]
+    fn realizable_codes_have_one_or_two_trees_of_at_most_nine_entries() {
+        let mut codes = BTreeSet::new();
+        for i in 0..7u32.pow(4) {
+            let c = [i % 7, i / 7 % 7, i / 49 % 7, i / 343 % 7].map(|x| x as f32);
+            let sub = Subgrid::new(c[0], c[1], c[2], c[3]).unwrap();
+            let t = Template::for_code(sub.code());
+            if sub.is_constant() {
+                assert_eq!(t.tree_count(), 0);
+                continue;
+            }
+            assert!((1..=2).contains(&t.tree_count()), "{c:?}");
+            for r in 0..t.tree_count() {
+                // Root plus at most the eight edges.
+                assert!(t.tree_range(r).len() <= 9);
+            }
+            codes.insert(sub.code().0);
+        }
+        // Measured: only 50 of the 256 codes come from real values (plus the
+        // constant subgrid's 0xFF); random reals and {0..12}^4 find no more.
+        assert_eq!(codes.len(), 50);
+    }
+
+    #[test]
+    fn table_size_is_as_documented() {
+        assert_eq!(TEMPLATE_TABLE_BYTES, 256 * core::mem::size_of::<Template>());
+        assert_eq!(core::mem::size_of::<Template>(), 136);
+    }
+}

@@ -68,7 +68,7 @@ struct ContourArgs {
     #[command(flatten)]
     source: Source,
     /// Contour level (repeatable). Default for a demo: its characteristic level.
-    #[arg(long = "level", value_name = "L", allow_negative_numbers = true)]
+    #[arg(long = "level", value_name = "L", allow_hyphen_values = true, value_parser = parse_level)]
     levels: Vec<f32>,
     /// Slicing planes, comma-separated: xy, xz, yz.
     #[arg(long, default_value = "xy,xz,yz", value_delimiter = ',')]
@@ -91,6 +91,18 @@ struct ContourArgs {
     traversal: TraversalArg,
 }
 
+/// A contour level: a finite number within the `f32` range.
+fn parse_level(s: &str) -> Result<f32, String> {
+    let x: f64 = s.trim().parse().map_err(|_| format!("`{s}` is not a number"))?;
+    if !x.is_finite() {
+        return Err(format!("`{s}` is not a finite number"));
+    }
+    if x.abs() > f64::from(f32::MAX) {
+        return Err(format!("`{s}` is outside the range of f32 samples"));
+    }
+    Ok(x as f32)
+}
+
 fn load(source: &Source) -> Result<(LoadedVolume, Option<DemoSpec>)> {
     match (&source.input, source.demo) {
         (Some(path), None) => {
@@ -106,6 +118,9 @@ fn load(source: &Source) -> Result<(LoadedVolume, Option<DemoSpec>)> {
 fn planes(axes: &[String]) -> Result<Vec<Plane>> {
     let mut out = Vec::new();
     for a in axes {
+        if a.trim().is_empty() {
+            bail!("--axes has an empty plane name (expected a comma-separated list of xy, xz, yz)");
+        }
         let p = Plane::from_name(a.trim())
             .with_context(|| format!("unknown axes `{a}` (expected xy, xz or yz)"))?;
         if !out.contains(&p) {
@@ -162,6 +177,12 @@ fn contour(args: &ContourArgs) -> Result<()> {
         Samples::I16(s) => run(s, d, &job),
         Samples::F32(s) => run(s, d, &job),
     }?;
+    if result.stats.cells == 0 {
+        eprintln!(
+            "isoscope-sim: warning: the volume is {nx}x{ny}x{nz}: its {} slices have no 2x2 cells to contour",
+            planes.iter().map(|p| p.name()).collect::<Vec<_>>().join(", ")
+        );
+    }
     if let Format::Csv = args.format {
         match &args.output {
             Some(path) => {
@@ -197,7 +218,23 @@ fn contour(args: &ContourArgs) -> Result<()> {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            use clap::error::ErrorKind;
+            if matches!(
+                e.kind(),
+                ErrorKind::DisplayHelp
+                    | ErrorKind::DisplayVersion
+                    | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+            ) {
+                e.exit();
+            }
+            // Usage errors: clap's message under our prefix, exit code 2.
+            eprint!("isoscope-sim: {}", e.render());
+            return ExitCode::from(2);
+        }
+    };
     let r = match &cli.command {
         Cmd::Contour(a) => contour(a),
     };

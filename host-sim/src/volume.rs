@@ -62,7 +62,14 @@ impl std::str::FromStr for Dims {
         }
         let mut n = [0usize; 3];
         for (slot, p) in n.iter_mut().zip(&parts) {
-            *slot = p.trim().parse().map_err(|_| bad())?;
+            let p = p.trim();
+            *slot = p.parse().map_err(|_| {
+                if !p.is_empty() && p.bytes().all(|b| b.is_ascii_digit()) {
+                    format!("`{s}`: the extent {p} is too large")
+                } else {
+                    bad()
+                }
+            })?;
             if *slot == 0 {
                 return Err(format!("`{s}`: every extent must be at least 1"));
             }

@@ -1,0 +1,567 @@
+//! End-to-end tests of `isoscope-sim contour`: the binary is run as a child
+//! process and its standard output, standard error and exit status checked.
+
+use std::collections::{HashMap, HashSet};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+const HEADER: &str = "level,axis,slice,op,x,y,z";
+
+/// Run `isoscope-sim` with `args`.
+fn run(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_isoscope-sim"))
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run isoscope-sim {args:?}: {e}"))
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8(bytes.to_vec()).expect("output is not UTF-8")
+}
+
+/// Run `contour` and expect success; the CSV on standard output.
+fn contour_ok(args: &[&str]) -> String {
+    let mut all = vec!["contour"];
+    all.extend_from_slice(args);
+    let out = run(&all);
+    assert!(out.status.success(), "isoscope-sim {all:?} failed with {}:\n{}", out.status, text(&out.stderr));
+    text(&out.stdout)
+}
+
+/// A temporary directory, removed on drop.
+struct TempDir(PathBuf);
+
+impl TempDir {
+    fn new(name: &str) -> Self {
+        static NEXT: AtomicUsize = AtomicUsize::new(0);
+        let n = NEXT.fetch_add(1, Ordering::Relaxed);
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.subsec_nanos());
+        let dir =
+            std::env::temp_dir().join(format!("isoscope-cli-{}-{name}-{n}-{nanos}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("cannot create a temporary directory");
+        Self(dir)
+    }
+
+    /// Write `bytes` to `name` in the directory; its path as a string.
+    fn file(&self, name: &str, bytes: &[u8]) -> String {
+        let p = self.0.join(name);
+        std::fs::write(&p, bytes).expect("cannot write a temporary file");
+        path_str(&p)
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn path_str(p: &Path) -> String {
+    p.to_str().expect("temporary path is not UTF-8").to_owned()
+}
+
+fn le_u16(v: &[u16]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+fn le_i16(v: &[i16]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+fn le_f32(v: &[f32]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+/// One CSV record.
+#[derive(Debug, Clone, PartialEq)]
+struct Rec {
+    level: String,
+    axis: String,
+    slice: usize,
+    op: char,
+    p: [f32; 3],
+}
+
+/// Parse a CSV export, checking the header and the shape of every line.
+fn parse_csv(csv: &str) -> Vec<Rec> {
+    let mut lines = csv.lines();
+    assert_eq!(lines.next(), Some(HEADER), "missing or wrong header");
+    lines
+        .enumerate()
+        .map(|(i, line)| {
+            let f: Vec<&str> = line.split(',').collect();
+            assert_eq!(f.len(), 7, "line {}: `{line}` has {} fields", i + 2, f.len());
+            let op = match f[3] {
+                "M" => 'M',
+                "L" => 'L',
+                "P" => 'P',
+                other => panic!("line {}: op `{other}` is not M, L or P", i + 2),
+            };
+            assert!(matches!(f[1], "xy" | "xz" | "yz"), "line {}: axis `{}`", i + 2, f[1]);
+            let level: f32 = f[0].parse().unwrap_or_else(|_| panic!("line {}: level `{}`", i + 2, f[0]));
+            assert!(level.is_finite(), "line {}: level {level}", i + 2);
+            let slice = f[2].parse().unwrap_or_else(|_| panic!("line {}: slice `{}`", i + 2, f[2]));
+            let mut p = [0f32; 3];
+            for (k, c) in p.iter_mut().enumerate() {
+                *c = f[4 + k].parse().unwrap_or_else(|_| panic!("line {}: coordinate `{}`", i + 2, f[4 + k]));
+                assert!(c.is_finite(), "line {}: coordinate {c} is not finite", i + 2);
+            }
+            Rec { level: f[0].to_owned(), axis: f[1].to_owned(), slice, op, p }
+        })
+        .collect()
+}
+
+/// Every (level, axis, slice) starts its commands with M or P, and every
+/// point lies in `[0, max]^3` with the slice coordinate equal to the slice.
+fn check_records(recs: &[Rec], max: [f32; 3]) {
+    let mut started: HashSet<(&str, &str, usize)> = HashSet::new();
+    for (i, r) in recs.iter().enumerate() {
+        if started.insert((&r.level, &r.axis, r.slice)) {
+            assert_ne!(r.op, 'L', "line {}: {r:?} is an L with no M or P before it in its slice", i + 2);
+        }
+        for (c, m) in r.p.iter().zip(max) {
+            assert!((0.0..=m).contains(c), "line {}: {r:?} outside the volume", i + 2);
+        }
+        let normal = match r.axis.as_str() {
+            "xy" => r.p[2],
+            "xz" => r.p[1],
+            _ => r.p[0],
+        };
+        assert_eq!(normal, r.slice as f32, "line {}: {r:?} is not on its slice", i + 2);
+    }
+}
+
+/// Parse the `key=value` lines of `--stats`.
+fn parse_stats(stderr: &str) -> HashMap<String, String> {
+    stderr.lines().filter_map(|l| l.split_once('=')).map(|(k, v)| (k.to_owned(), v.to_owned())).collect()
+}
+
+fn stat_u64(stats: &HashMap<String, String>, key: &str) -> u64 {
+    stats
+        .get(key)
+        .unwrap_or_else(|| panic!("--stats has no {key}: {stats:?}"))
+        .parse()
+        .unwrap_or_else(|_| panic!("{key} is not a whole number: {stats:?}"))
+}
+
+#[test]
+fn demo_hydrogen_csv_is_well_formed() {
+    let csv = contour_ok(&["--demo", "hydrogen:32"]);
+    let recs = parse_csv(&csv);
+    assert!(recs.len() > 1000, "only {} commands", recs.len());
+    check_records(&recs, [31.0; 3]);
+    for axis in ["xy", "xz", "yz"] {
+        assert!(recs.iter().any(|r| r.axis == axis), "no {axis} commands");
+    }
+    // The default level of the hydrogen demo.
+    assert!(recs.iter().all(|r| r.level == "0.1"));
+}
+
+#[test]
+fn output_file_equals_standard_output() {
+    let dir = TempDir::new("output");
+    let path = path_str(&dir.0.join("out.csv"));
+    let stdout = contour_ok(&["--demo", "gyroid:8", "--threads", "2"]);
+    let quiet = contour_ok(&["--demo", "gyroid:8", "--threads", "2", "-o", &path]);
+    assert_eq!(quiet, "", "-o still wrote to standard output");
+    assert_eq!(std::fs::read_to_string(&path).unwrap(), stdout);
+}
+
+#[test]
+fn stats_without_output() {
+    let out = run(&["contour", "--demo", "hydrogen:32", "--format", "none", "--stats"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(out.stdout.is_empty(), "--format none wrote {} bytes", out.stdout.len());
+    let stats = parse_stats(&text(&out.stderr));
+    for key in [
+        "cells",
+        "crossing_cells",
+        "nonfinite_cells",
+        "commands",
+        "levels",
+        "threads",
+        "seconds",
+        "mcells_per_s",
+    ] {
+        assert!(stats.contains_key(key), "--stats has no {key}:\n{}", text(&out.stderr));
+    }
+    assert_eq!(stat_u64(&stats, "cells"), 3 * 32 * 31 * 31);
+    assert_eq!(stat_u64(&stats, "nonfinite_cells"), 0);
+    assert_eq!(stat_u64(&stats, "levels"), 1);
+    assert!(stat_u64(&stats, "threads") >= 1);
+    let crossing = stat_u64(&stats, "crossing_cells");
+    assert!(crossing > 0 && crossing <= 3 * 32 * 31 * 31);
+    for key in ["seconds", "mcells_per_s"] {
+        let v: f64 = stats[key].parse().unwrap_or_else(|_| panic!("{key} is not a number: {stats:?}"));
+        assert!(v.is_finite() && v >= 0.0, "{key}={v}");
+    }
+    // The commands counted are the commands written.
+    let csv = contour_ok(&["--demo", "hydrogen:32"]);
+    assert_eq!(stat_u64(&stats, "commands"), csv.lines().count() as u64 - 1);
+}
+
+#[test]
+fn stats_count_cells_of_the_chosen_planes_and_levels() {
+    let out = run(&[
+        "contour",
+        "--demo",
+        "gyroid:12",
+        "--axes",
+        "xz",
+        "--level",
+        "0",
+        "--level",
+        "0.5",
+        "--threads",
+        "3",
+        "--format",
+        "none",
+        "--stats",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stats = parse_stats(&text(&out.stderr));
+    assert_eq!(stat_u64(&stats, "cells"), 12 * 11 * 11);
+    assert_eq!(stat_u64(&stats, "levels"), 2);
+    assert_eq!(stat_u64(&stats, "threads"), 3);
+}
+
+const GYROID_TWO_LEVELS: [&str; 6] = ["--demo", "gyroid:20", "--level", "-0.3", "--level", "0.4"];
+
+#[test]
+fn output_does_not_depend_on_thread_count() {
+    let with = |t: &str| {
+        let mut a = GYROID_TWO_LEVELS.to_vec();
+        a.extend(["--threads", t]);
+        contour_ok(&a)
+    };
+    let one = with("1");
+    let recs = parse_csv(&one);
+    check_records(&recs, [19.0; 3]);
+    for level in ["-0.3", "0.4"] {
+        assert!(recs.iter().any(|r| r.level == level), "no commands at level {level}");
+    }
+    for t in ["2", "3"] {
+        assert!(with(t) == one, "--threads {t} differs from --threads 1");
+    }
+}
+
+#[test]
+fn one_plane_is_its_lines_of_all_planes() {
+    let all = contour_ok(&GYROID_TWO_LEVELS);
+    for axis in ["xy", "xz", "yz"] {
+        let mut a = GYROID_TWO_LEVELS.to_vec();
+        a.extend(["--axes", axis]);
+        let one = contour_ok(&a);
+        let expected: Vec<&str> = all.lines().skip(1).filter(|l| l.split(',').nth(1) == Some(axis)).collect();
+        let got: Vec<&str> = one.lines().skip(1).collect();
+        assert!(!got.is_empty());
+        assert!(got == expected, "--axes {axis} differs from the {axis} lines of all planes");
+    }
+    // Repeated and reordered planes: each once, in the order given.
+    let mut a = GYROID_TWO_LEVELS.to_vec();
+    a.extend(["--axes", "yz,xy,yz"]);
+    let two = contour_ok(&a);
+    let axes: Vec<&str> = two.lines().skip(1).filter_map(|l| l.split(',').nth(1)).collect();
+    let first_xy = axes.iter().position(|a| *a == "xy").expect("no xy lines");
+    assert!(axes[..first_xy].iter().all(|a| *a == "yz") && axes[first_xy..].iter().all(|a| *a == "xy"));
+}
+
+// --- Raw volume files -------------------------------------------------------
+
+/// The paper's Figure 5 subgrid, x fastest: LL, LR, UL, UR.
+const FIGURE5: [u16; 4] = [150, 40, 30, 60];
+
+/// The Figure 5 commands at level 100: op, x, y.
+const FIGURE5_AT_100: [(char, f32, f32); 3] =
+    [('M', 50.0 / 110.0, 0.0), ('L', 0.3125, 0.3125), ('L', 0.0, 50.0 / 120.0)];
+
+fn assert_figure5(csv: &str, level: &str) {
+    let recs = parse_csv(csv);
+    assert_eq!(recs.len(), FIGURE5_AT_100.len(), "{csv}");
+    for (r, &(op, x, y)) in recs.iter().zip(&FIGURE5_AT_100) {
+        assert_eq!((r.level.as_str(), r.axis.as_str(), r.slice, r.op), (level, "xy", 0, op), "{csv}");
+        let close = (r.p[0] - x).abs() < 1e-4 && (r.p[1] - y).abs() < 1e-4 && r.p[2] == 0.0;
+        assert!(close, "{r:?} is not ({x}, {y}, 0):\n{csv}");
+    }
+}
+
+#[test]
+fn raw_figure5_in_every_sample_type() {
+    let dir = TempDir::new("figure5");
+    let bytes_u8: Vec<u8> = FIGURE5.iter().map(|&v| v as u8).collect();
+    let f32s: Vec<f32> = FIGURE5.iter().map(|&v| f32::from(v)).collect();
+    let i16s: Vec<i16> = FIGURE5.iter().map(|&v| v as i16).collect();
+    let files = [
+        ("u8", dir.file("f5.u8", &bytes_u8)),
+        ("u16", dir.file("f5.u16", &le_u16(&FIGURE5))),
+        ("i16", dir.file("f5.i16", &le_i16(&i16s))),
+        ("f32", dir.file("f5.f32", &le_f32(&f32s))),
+    ];
+    let mut first = None;
+    for (dtype, path) in &files {
+        let csv = contour_ok(&[path, "--dims", "2x2x1", "--dtype", dtype, "--axes", "xy", "--level", "100"]);
+        assert_figure5(&csv, "100");
+        // Every sample type widens exactly: the same bits.
+        match &first {
+            None => first = Some(csv),
+            Some(f) => assert_eq!(&csv, f, "--dtype {dtype} differs from --dtype u8"),
+        }
+    }
+    // The other planes of a one-slice volume have no cells.
+    let (_, path) = &files[0];
+    let csv = contour_ok(&[path, "--dims", "2x2x1", "--dtype", "u8", "--axes", "xz,yz", "--level", "100"]);
+    assert_eq!(csv, format!("{HEADER}\n"));
+}
+
+#[test]
+fn raw_i16_with_negative_samples() {
+    let dir = TempDir::new("i16");
+    // Figure 5 negated, at level -100: the same crossing points.
+    let neg: Vec<i16> = FIGURE5.iter().map(|&v| -(v as i16)).collect();
+    let path = dir.file("neg.i16", &le_i16(&neg));
+    let csv = contour_ok(&[&path, "--dims", "2x2x1", "--dtype", "i16", "--axes", "xy", "--level=-100"]);
+    // (The contouring tree of the negated values is traversed from another
+    // root, so the same lines may come as two polylines.)
+    let recs = parse_csv(&csv);
+    check_records(&recs, [1.0, 1.0, 0.0]);
+    let near =
+        |r: &Rec, x: f32, y: f32| (r.p[0] - x).abs() < 1e-4 && (r.p[1] - y).abs() < 1e-4 && r.p[2] == 0.0;
+    for r in &recs {
+        assert_eq!((r.level.as_str(), r.axis.as_str()), ("-100", "xy"), "{csv}");
+        assert!(
+            FIGURE5_AT_100.iter().any(|&(_, x, y)| near(r, x, y)),
+            "{r:?} is not a Figure 5 point:\n{csv}"
+        );
+    }
+    for &(_, x, y) in &FIGURE5_AT_100 {
+        assert!(recs.iter().any(|r| near(r, x, y)), "no point near ({x}, {y}, 0):\n{csv}");
+    }
+
+    // A 5x4x3 ramp through zero, as i16 and as f32: the same CSV, and the
+    // plane v = -250 (read as u16, the samples would never cross it).
+    let (nx, ny, nz) = (5usize, 4usize, 3usize);
+    let ramp: Vec<i16> = (0..nx * ny * nz)
+        .map(|i| {
+            let (x, y, z) = (i % nx, i / nx % ny, i / (nx * ny));
+            (x as i16 * 300 + y as i16 * 200 + z as i16 * 100) - 1000
+        })
+        .collect();
+    assert!(ramp.iter().any(|&v| v < -250) && ramp.iter().any(|&v| v > -250));
+    let as_f32: Vec<f32> = ramp.iter().map(|&v| f32::from(v)).collect();
+    let pi = dir.file("ramp.i16", &le_i16(&ramp));
+    let pf = dir.file("ramp.f32", &le_f32(&as_f32));
+    let args = |p: &str, dtype: &str| {
+        contour_ok(&[
+            p,
+            "--dims",
+            "5x4x3",
+            "--dtype",
+            dtype,
+            "--level=-250",
+            "--level",
+            "0",
+            "--threads",
+            "2",
+        ])
+    };
+    let csv_i = args(&pi, "i16");
+    assert_eq!(csv_i, args(&pf, "f32"));
+    let recs = parse_csv(&csv_i);
+    check_records(&recs, [4.0, 3.0, 2.0]);
+    assert!(recs.iter().any(|r| r.level == "-250"), "no crossing of -250:\n{csv_i}");
+    assert!(recs.iter().any(|r| r.level == "0"), "no crossing of 0:\n{csv_i}");
+}
+
+#[test]
+fn nan_samples_are_skipped_not_fatal() {
+    let dir = TempDir::new("nan");
+    let n = 6usize;
+    let mut v: Vec<f32> = (0..n * n * n).map(|i| (i % n + i / n % n + i / (n * n)) as f32 - 7.5).collect();
+    v[(2 * n + 2) * n + 2] = f32::NAN;
+    v[(4 * n + 1) * n + 3] = f32::INFINITY;
+    let path = dir.file("nan.f32", &le_f32(&v));
+    let out = run(&["contour", &path, "--dims", "6x6x6", "--dtype", "f32", "--level", "0.25", "--stats"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stats = parse_stats(&text(&out.stderr));
+    let nonfinite = stat_u64(&stats, "nonfinite_cells");
+    assert!(nonfinite > 0, "{stats:?}");
+    // Each of the two bad samples touches up to 4 cells in each of 3 slices.
+    assert!(nonfinite <= 24, "{stats:?}");
+    assert_eq!(stat_u64(&stats, "cells"), 3 * 6 * 5 * 5);
+    let recs = parse_csv(&text(&out.stdout));
+    assert!(!recs.is_empty());
+    check_records(&recs, [5.0; 3]);
+    assert_eq!(stat_u64(&stats, "commands"), recs.len() as u64);
+}
+
+// --- Bad input ----------------------------------------------------------------
+
+/// Run `contour` and expect it to fail with an `isoscope-sim: error:` line
+/// naming every one of `causes`, nothing but (at most) the header on
+/// standard output.
+fn assert_error(args: &[&str], causes: &[&str]) {
+    let mut all = vec!["contour"];
+    all.extend_from_slice(args);
+    let out = run(&all);
+    let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
+    assert!(!out.status.success(), "isoscope-sim {all:?} succeeded:\n{stderr}");
+    // 1 for a failure while running, 2 for a usage error.
+    assert!(matches!(out.status.code(), Some(1 | 2)), "isoscope-sim {all:?}: {}\n{stderr}", out.status);
+    assert!(stdout.is_empty() || stdout == format!("{HEADER}\n"), "isoscope-sim {all:?} wrote:\n{stdout}");
+    assert!(stderr.starts_with("isoscope-sim: error: "), "isoscope-sim {all:?}: {stderr}");
+    for cause in causes {
+        assert!(stderr.contains(cause), "isoscope-sim {all:?}: `{cause}` not in: {stderr}");
+    }
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+/// Run `contour` and expect a command-line usage error from clap (exit code
+/// 2, `error: ...` naming every one of `causes`), nothing on standard output.
+fn assert_usage_error(args: &[&str], causes: &[&str]) {
+    let mut all = vec!["contour"];
+    all.extend_from_slice(args);
+    let out = run(&all);
+    let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
+    assert_eq!(out.status.code(), Some(2), "isoscope-sim {all:?}: {}\n{stderr}", out.status);
+    assert!(stdout.is_empty(), "isoscope-sim {all:?} wrote:\n{stdout}");
+    assert!(stderr.starts_with("isoscope-sim: error: "), "isoscope-sim {all:?}: {stderr}");
+    for cause in causes {
+        assert!(stderr.contains(cause), "isoscope-sim {all:?}: `{cause}` not in: {stderr}");
+    }
+}
+
+#[test]
+fn missing_file() {
+    let dir = TempDir::new("missing");
+    let path = path_str(&dir.0.join("no-such-volume.raw"));
+    assert_error(&[&path, "--dims", "2x2x1", "--dtype", "u8", "--level", "1"], &["cannot read", &path]);
+}
+
+#[test]
+fn file_too_short_or_too_long() {
+    let dir = TempDir::new("size");
+    let path = dir.file("v.u16", &le_u16(&[1, 2, 3, 4, 5, 6, 7]));
+    // 14 bytes; 2x2x2 u16 needs 16.
+    assert_error(
+        &[&path, "--dims", "2x2x2", "--dtype", "u16", "--level", "1"],
+        &[&path, "truncated", "14 bytes", "16 bytes"],
+    );
+    // 14 bytes; 3x2x1 u16 needs 12.
+    assert_error(
+        &[&path, "--dims", "3x2x1", "--dtype", "u16", "--level", "1"],
+        &[&path, "14 bytes", "12 bytes"],
+    );
+    // An odd length for 2-byte samples.
+    let odd = dir.file("odd.i16", &[0u8; 9]);
+    assert_error(&[&odd, "--dims", "2x2x1", "--dtype", "i16", "--level", "1"], &["9 bytes", "8 bytes"]);
+    // The empty file.
+    let empty = dir.file("empty.f32", &[]);
+    assert_error(&[&empty, "--dims", "1x1x1", "--dtype", "f32", "--level", "1"], &["0 bytes", "truncated"]);
+}
+
+#[test]
+fn extents_that_overflow() {
+    let dir = TempDir::new("overflow");
+    let path = dir.file("v.u8", &[0u8; 4]);
+    let huge = format!("{}x4x1", usize::MAX / 2);
+    assert_error(&[&path, "--dims", &huge, "--dtype", "u8", "--level", "1"], &["overflow"]);
+}
+
+#[test]
+fn a_file_needs_dims_dtype_and_level() {
+    let dir = TempDir::new("flags");
+    let path = dir.file("v.u8", &[0u8, 1, 2, 3]);
+    assert_error(&[&path, "--dtype", "u8", "--level", "1"], &["--dims"]);
+    assert_error(&[&path, "--dims", "2x2x1", "--level", "1"], &["--dtype"]);
+    assert_error(&[&path, "--dims", "2x2x1", "--dtype", "u8"], &["--level"]);
+}
+
+#[test]
+fn no_source_at_all() {
+    assert_error(&[], &["--demo"]);
+    assert_error(&["--level", "1"], &["--demo"]);
+}
+
+#[test]
+fn unknown_dtype() {
+    let dir = TempDir::new("dtype");
+    let path = dir.file("v.u8", &[0u8; 4]);
+    assert_usage_error(&[&path, "--dims", "2x2x1", "--dtype", "u32", "--level", "1"], &["u32", "--dtype"]);
+}
+
+#[test]
+fn malformed_dims() {
+    let dir = TempDir::new("dims");
+    let path = dir.file("v.u8", &[0u8; 4]);
+    for (dims, cause) in
+        [("12x12", "NXxNYxNZ"), ("0x2x2", "at least 1"), ("axbxc", "NXxNYxNZ"), ("2x2x1x1", "NXxNYxNZ")]
+    {
+        assert_usage_error(
+            &[&path, "--dims", dims, "--dtype", "u8", "--level", "1"],
+            &[dims, "--dims", cause],
+        );
+    }
+}
+
+#[test]
+fn bad_demo() {
+    assert_usage_error(&["--demo", "nosuch:8"], &["nosuch", "hydrogen", "gyroid"]);
+    assert_usage_error(&["--demo", "gyroid:1"], &["gyroid:1", "between 2 and"]);
+    assert_usage_error(&["--demo", "gyroid:big"], &["gyroid:big", "whole number"]);
+    assert_usage_error(&["--demo", "gyroid:4096"], &["between 2 and"]);
+}
+
+#[test]
+fn file_and_demo_together() {
+    let dir = TempDir::new("both");
+    let path = dir.file("v.u8", &[0u8; 8]);
+    assert_usage_error(&[&path, "--demo", "gyroid:4"], &["--demo"]);
+}
+
+#[test]
+fn non_finite_levels() {
+    assert_error(&["--demo", "gyroid:4", "--level", "NaN"], &["--level", "NaN", "not a finite number"]);
+    assert_error(&["--demo", "gyroid:4", "--level", "inf"], &["--level", "inf", "not a finite number"]);
+    assert_error(&["--demo", "gyroid:4", "--level", "0", "--level=-inf"], &["-inf", "not a finite number"]);
+    assert_error(&["--demo", "gyroid:4", "--level", "1e40"], &["1e40", "outside the range"]);
+    assert_error(&["--demo", "gyroid:4", "--level", "abc"], &["abc", "not a number"]);
+    let dir = TempDir::new("nan-level");
+    let path = dir.file("v.u8", &[0u8; 8]);
+    assert_error(&[&path, "--dims", "2x2x2", "--dtype", "u8", "--level", "nan"], &["not a finite number"]);
+}
+
+#[test]
+fn negative_infinite_level_as_separate_argument() {
+    assert_error(&["--demo", "gyroid:4", "--level", "-inf"], &["not a finite number"]);
+}
+
+#[test]
+fn bad_axes() {
+    assert_error(&["--demo", "gyroid:4", "--axes", "xq"], &["xq", "xy, xz or yz"]);
+    assert_error(&["--demo", "gyroid:4", "--axes", "xy,zz"], &["zz"]);
+}
+
+#[test]
+fn zero_threads() {
+    assert_error(&["--demo", "gyroid:4", "--threads", "0"], &["--threads", "at least 1"]);
+}
+
+#[test]
+fn unwritable_output() {
+    let dir = TempDir::new("unwritable");
+    let path = path_str(&dir.0.join("no-such-dir").join("out.csv"));
+    assert_error(&["--demo", "gyroid:4", "-o", &path], &["cannot create", &path]);
+}
+
+#[test]
+fn every_error_has_the_isoscope_prefix() {
+    let dir = TempDir::new("prefix");
+    let path = dir.file("v.u8", &[0u8; 4]);
+    assert_error(&[&path, "--dims", "2x2x1", "--dtype", "u32", "--level", "1"], &["u32"]);
+    assert_error(&[&path, "--dims", "12x12", "--dtype", "u8", "--level", "1"], &["12x12"]);
+    assert_error(&["--demo", "nosuch:8"], &["nosuch"]);
+    assert_error(&["--demo", "gyroid:1"], &["gyroid:1"]);
+}
