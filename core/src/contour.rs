@@ -9,8 +9,8 @@ use crate::grid::{Grid2, GridError};
 use crate::pen::{Pen, Placed, Placement};
 use crate::sample::Sample;
 use crate::subgrid::Subgrid;
-use crate::sweep::{BLOCK, Layout, Rows, Sweep, gather};
-use crate::trace::{Crossing, Traversal, visit};
+use crate::sweep::{BLOCK, Scratch, Sweep, lane};
+use crate::trace::{Conn, Crossing, Traversal, visit};
 use crate::tree::Template;
 use core::ops::Range;
 
@@ -100,9 +100,12 @@ pub fn contour_subgrid<P, S: CommandSink<P>>(
     sink: &mut S,
 ) -> Result<u64, S::Error> {
     let tpl = Template::for_code(sub.code());
+    let (lo, hi) = sub.range();
     let mut sent = 0u64;
     for (li, &level) in levels.iter().enumerate() {
-        let mut pen = Pen::new();
+        if !(lo <= level && level <= hi) {
+            continue;
+        }
         let mut placed = Placed::new();
         let mut send = |c: Command<(f32, f32)>| {
             sent += 1;
@@ -110,17 +113,40 @@ pub fn contour_subgrid<P, S: CommandSink<P>>(
         };
         let mut out = |c: Command<Crossing>| placed.step(c.map(|x| at.locate(sub, level, x)), &mut send);
         let mut err = None;
-        visit(sub, tpl, level, traversal, |conn, x| {
-            if err.is_none() {
-                if let Err(e) = pen.step(conn, x, &mut out) {
-                    err = Some(e);
+        if sub.values().contains(&level) {
+            // Nodes at the level: the pen tidies repeated crossings,
+            // equal-valued edges met twice and lone points.
+            let mut pen = Pen::new();
+            visit(sub, tpl, level, traversal, |conn, x| {
+                if err.is_none() {
+                    if let Err(e) = pen.step(conn, x, &mut out) {
+                        err = Some(e);
+                    }
                 }
+            });
+            if err.is_none() {
+                pen.finish(&mut out)?;
             }
-        });
+        } else {
+            // No node at the level: every crossing lies inside an edge, each
+            // tree edge is met once, and every SETPOINT is followed by a
+            // DRAWTO (the exhaustive test checks all of this), so the
+            // instructions map straight to commands.
+            visit(sub, tpl, level, traversal, |conn, x| {
+                if err.is_none() {
+                    let c = match conn {
+                        Conn::SetPoint => Command::MoveTo(x),
+                        Conn::DrawTo => Command::LineTo(x),
+                    };
+                    if let Err(e) = out(c) {
+                        err = Some(e);
+                    }
+                }
+            });
+        }
         if let Some(e) = err {
             return Err(e);
         }
-        pen.finish(&mut out)?;
         placed.finish(&mut send)?;
     }
     Ok(sent)
@@ -160,7 +186,7 @@ pub fn contour_rows<T: Sample, P, S: CommandSink<P>>(
     check_levels(levels)?;
     let sweep = Sweep::new(levels, traversal);
     let mut stats = ContourStats::default();
-    let mut buf = Rows::new();
+    let mut scratch = Scratch::new();
     let (data, offset, sx, sy) = grid.layout();
     let (nx, ny) = (grid.nx(), grid.ny());
     let rows = rows.start..rows.end.min(ny - 1);
@@ -169,14 +195,14 @@ pub fn contour_rows<T: Sample, P, S: CommandSink<P>>(
         while i0 + 1 < nx {
             let n = (nx - 1 - i0).min(BLOCK);
             let start = offset + j * sy + i0 * sx;
-            let [r0, r1, ..] = &mut buf.v;
-            gather(data, start, sx, r0.get_mut(..=n).unwrap_or(&mut []));
-            gather(data, start + sy, sx, r1.get_mut(..=n).unwrap_or(&mut []));
+            let [b0, b1, ..] = &mut scratch.bufs;
+            let r0 = lane(data, start, sx, n + 1, b0);
+            let r1 = lane(data, start + sy, sx, n + 1, b1);
+            let (l0, l1) = (r0.get(1..).unwrap_or(&[]), r1.get(1..).unwrap_or(&[]));
             sweep
                 .run(
-                    &mut buf,
-                    Layout::TwoRows,
-                    n,
+                    [r0, l0, l1, r1],
+                    &mut scratch.busy,
                     |k| Placement::new(i0 + k, j),
                     |_, x, y| place(x, y),
                     sink,

@@ -67,7 +67,7 @@ impl Placement {
     }
 
     /// The grid coordinates of a crossing at `level`.
-    #[inline]
+    #[inline(always)]
     pub fn locate(&self, sub: &Subgrid, level: f32, at: Crossing) -> (f32, f32) {
         let xc = self.x0 + 0.5;
         let yc = self.y0 + 0.5;
@@ -115,7 +115,7 @@ impl Pen {
 
     /// Take one instruction; `out` receives the commands it yields, with the
     /// crossing they are at.
-    #[inline]
+    #[inline(always)]
     pub fn step<E>(
         &mut self,
         conn: Conn,
@@ -153,7 +153,7 @@ impl Pen {
     }
 
     /// End of the subgrid: emit the points that no line covers.
-    #[inline]
+    #[inline(always)]
     pub fn finish<E>(&mut self, mut out: impl FnMut(Command<Crossing>) -> Result<(), E>) -> Result<(), E> {
         if let Some(p) = self.pending.take() {
             self.lone |= bit(p);
@@ -179,18 +179,23 @@ impl Pen {
 /// starting a new one.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Placed {
-    at: Option<(f32, f32)>,
-    held: Option<(f32, f32)>,
+    /// Where the beam is (valid when `has_at`).
+    at: (f32, f32),
+    /// A SETPOINT not yet sent (valid when `has_held`): it is sent with the
+    /// first line of non-zero length that follows it.
+    held: (f32, f32),
+    has_at: bool,
+    has_held: bool,
 }
 
 impl Placed {
     /// Nothing drawn yet.
     pub const fn new() -> Self {
-        Self { at: None, held: None }
+        Self { at: (0.0, 0.0), held: (0.0, 0.0), has_at: false, has_held: false }
     }
 
     /// Take one placed command; `out` receives what should be drawn.
-    #[inline]
+    #[inline(always)]
     pub fn step<E>(
         &mut self,
         c: Command<(f32, f32)>,
@@ -198,50 +203,56 @@ impl Placed {
     ) -> Result<(), E> {
         match c {
             Command::MoveTo(p) => {
-                if self.held.is_some() || self.at != Some(p) {
+                if self.has_held || !(self.has_at && self.at == p) {
                     self.collapse(&mut out)?;
-                    self.held = Some(p);
+                    self.held = p;
+                    self.has_held = true;
                 }
-                self.at = Some(p);
+                self.at = p;
+                self.has_at = true;
             }
             Command::LineTo(p) => {
-                if self.at != Some(p) {
-                    if let Some(m) = self.held.take() {
-                        out(Command::MoveTo(m))?;
-                    } else if self.at.is_none() {
-                        // A line with no start: draw it as its end point.
-                        return self.step(Command::MoveTo(p), out);
+                if !(self.has_at && self.at == p) {
+                    if self.has_held {
+                        self.has_held = false;
+                        out(Command::MoveTo(self.held))?;
+                        out(Command::LineTo(p))?;
+                    } else if self.has_at {
+                        out(Command::LineTo(p))?;
+                    } else {
+                        // A line with no start: hold its end as a SETPOINT.
+                        self.held = p;
+                        self.has_held = true;
                     }
-                    out(Command::LineTo(p))?;
-                    self.at = Some(p);
+                    self.at = p;
+                    self.has_at = true;
                 }
             }
             Command::Point(p) => {
                 self.collapse(&mut out)?;
                 out(Command::Point(p))?;
-                self.at = None;
+                self.has_at = false;
             }
         }
         Ok(())
     }
 
     /// End of the subgrid.
-    #[inline]
+    #[inline(always)]
     pub fn finish<E>(&mut self, mut out: impl FnMut(Command<(f32, f32)>) -> Result<(), E>) -> Result<(), E> {
         self.collapse(&mut out)?;
-        self.at = None;
+        self.has_at = false;
         Ok(())
     }
 
     /// A held SETPOINT whose lines all had zero length is a point.
-    #[inline]
+    #[inline(always)]
     fn collapse<E>(&mut self, out: &mut impl FnMut(Command<(f32, f32)>) -> Result<(), E>) -> Result<(), E> {
-        match self.held.take() {
-            Some(m) => {
-                self.at = None;
-                out(Command::Point(m))
-            }
-            None => Ok(()),
+        if self.has_held {
+            self.has_held = false;
+            self.has_at = false;
+            out(Command::Point(self.held))?;
         }
+        Ok(())
     }
 }

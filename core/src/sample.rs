@@ -10,6 +10,13 @@
 pub trait Sample: Copy + sealed::Sealed {
     /// The sample as an `f32` (exact for the integer types).
     fn to_f32(self) -> f32;
+
+    /// The samples as `f32`s without copying, when they already are.
+    #[inline(always)]
+    fn as_f32s(samples: &[Self]) -> Option<&[f32]> {
+        let _ = samples;
+        None
+    }
 }
 
 mod sealed {
@@ -45,5 +52,10 @@ impl Sample for f32 {
     #[inline(always)]
     fn to_f32(self) -> f32 {
         self
+    }
+
+    #[inline(always)]
+    fn as_f32s(samples: &[Self]) -> Option<&[f32]> {
+        Some(samples)
     }
 }

@@ -194,8 +194,8 @@ impl DirectionCode {
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Subgrid {
-    /// LL, LR, UR, UL, C, padded to eight so that a masked index needs no
-    /// bounds check.
+    /// LL, LR, UR, UL, C, then the smallest and largest corner, padded to
+    /// eight so that a masked index needs no bounds check.
     values: [f32; 8],
 }
 
@@ -244,7 +244,7 @@ impl Subgrid {
         let max = |a: f32, b: f32| if a > b { a } else { b };
         let lo = min(min(ll, lr), min(ur, ul));
         let hi = max(max(ll, lr), max(ur, ul));
-        Self { values: [ll, lr, ur, ul, min(max(c, lo), hi), 0.0, 0.0, 0.0] }
+        Self { values: [ll, lr, ur, ul, min(max(c, lo), hi), lo, hi, 0.0] }
     }
 
     /// The value at a node.
@@ -263,6 +263,12 @@ impl Subgrid {
     pub fn values(&self) -> [f32; 5] {
         let [ll, lr, ur, ul, c, ..] = self.values;
         [ll, lr, ur, ul, c]
+    }
+
+    /// The smallest and the largest value (the centre lies between them).
+    #[inline(always)]
+    pub fn range(&self) -> (f32, f32) {
+        (self.at(5), self.at(6))
     }
 
     /// True when all four corners are equal (the paper draws nothing then).
@@ -290,7 +296,7 @@ impl Subgrid {
     /// Where the level crosses `edge`, as a fraction along its canonical
     /// direction (0.0 at the first node, 1.0 at the second), clamped to
     /// [0, 1]. A crossing at a node is exact (0.0 or 1.0).
-    #[inline]
+    #[inline(always)]
     pub fn crossing(&self, edge: Edge, level: f32) -> f32 {
         let (a, b) = edge.canonical();
         let (va, vb) = (self.value(a), self.value(b));

@@ -10,7 +10,7 @@ use crate::contour::{ContourError, ContourStats, check_levels, contour_grid, con
 use crate::grid::{Plane, Planes, Volume};
 use crate::pen::Placement;
 use crate::sample::Sample;
-use crate::sweep::{BLOCK, Layout, Rows, Sweep, gather};
+use crate::sweep::{BLOCK, Scratch, Sweep, lane};
 use crate::trace::Traversal;
 use core::ops::Range;
 
@@ -128,7 +128,7 @@ pub fn contour_band<T: Sample, S: SurfaceSink>(
     let data = volume.data();
     let sweep = Sweep::new(levels, traversal);
     let mut stats = ContourStats::default();
-    let mut lanes = Rows::new();
+    let mut scratch = Scratch::new();
     let mut adapter = LaneSink { sink };
     let rows_len = rows.len();
     for z in rows {
@@ -137,16 +137,17 @@ pub fn contour_band<T: Sample, S: SurfaceSink>(
             let mut x0 = 0;
             while x0 < nx {
                 let n = (nx - x0).min(BLOCK);
-                let [v0, v1, v2, v3] = &mut lanes.v;
-                gather(data, row(y, z) + x0, 1, v0.get_mut(..n).unwrap_or(&mut []));
-                gather(data, row(y + 1, z) + x0, 1, v1.get_mut(..n).unwrap_or(&mut []));
-                gather(data, row(y + 1, z + 1) + x0, 1, v2.get_mut(..n).unwrap_or(&mut []));
-                gather(data, row(y, z + 1) + x0, 1, v3.get_mut(..n).unwrap_or(&mut []));
+                let [b0, b1, b2, b3] = &mut scratch.bufs;
+                let lanes = [
+                    lane(data, row(y, z) + x0, 1, n, b0),
+                    lane(data, row(y + 1, z) + x0, 1, n, b1),
+                    lane(data, row(y + 1, z + 1) + x0, 1, n, b2),
+                    lane(data, row(y, z + 1) + x0, 1, n, b3),
+                ];
                 sweep
                     .run(
-                        &mut lanes,
-                        Layout::FourLanes,
-                        n,
+                        lanes,
+                        &mut scratch.busy,
                         |_| Placement::new(y, z),
                         |k, u, v| (x0 + k, Point3::new((x0 + k) as f32, u, v)),
                         &mut adapter,

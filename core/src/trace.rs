@@ -73,7 +73,7 @@ impl core::fmt::Debug for Crossing {
 /// The drawing instruction of a tree entry: SETPOINT on a root, on the first
 /// copy of a sink node, or on a node whose value is a new lowest value of the
 /// tree in pre-order; DRAWTO otherwise.
-#[inline]
+#[inline(always)]
 pub fn conn(sub: &Subgrid, e: &Entry) -> Conn {
     if e.is_root() || e.is_first_sink() {
         return Conn::SetPoint;
