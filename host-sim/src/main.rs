@@ -38,7 +38,7 @@ struct Source {
     /// Volume extents NXxNYxNZ (a 2D grid has NZ = 1).
     #[arg(long, requires = "input")]
     dims: Option<Dims>,
-    /// Sample type of the raw file.
+    /// Sample type of the raw file: u8, u16, i16 or f32 (little-endian).
     #[arg(long, requires = "input")]
     dtype: Option<Dtype>,
     /// A built-in volume instead of a file: hydrogen:N (the paper's Figure 1,
