@@ -62,10 +62,12 @@
 
 pub mod command;
 pub mod contour;
+pub mod dac;
 pub mod demo;
 pub mod grid;
 pub mod pen;
 pub mod sample;
+pub mod screen;
 pub mod subgrid;
 pub mod surface;
 mod sweep;
