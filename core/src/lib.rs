@@ -63,6 +63,7 @@
 pub mod command;
 pub mod contour;
 pub mod dac;
+pub mod display;
 pub mod demo;
 pub mod grid;
 pub mod pen;
