@@ -32,7 +32,8 @@ enum Cmd {
 
 #[derive(Args, Debug)]
 struct Source {
-    /// Raw little-endian volume file, x fastest (needs --dims and --dtype).
+    /// Volume file: a VolPack .den, or raw little-endian samples, x fastest
+    /// (a raw file needs --dims and --dtype).
     #[arg(conflicts_with = "demo")]
     input: Option<PathBuf>,
     /// Volume extents NXxNYxNZ (a 2D grid has NZ = 1).
@@ -106,6 +107,11 @@ fn parse_level(s: &str) -> Result<f32, String> {
 fn load(source: &Source) -> Result<(LoadedVolume, Option<DemoSpec>)> {
     match (&source.input, source.demo) {
         (Some(path), None) => {
+            if source.dims.is_none() && source.dtype.is_none() {
+                if let Some(v) = LoadedVolume::read_known(path)? {
+                    return Ok((v, None));
+                }
+            }
             let dims = source.dims.context("a volume file needs --dims NXxNYxNZ")?;
             let dtype = source.dtype.context("a volume file needs --dtype u8|u16|i16|f32")?;
             Ok((LoadedVolume::read_raw(path, dims, dtype)?, None))

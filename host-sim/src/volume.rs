@@ -173,6 +173,54 @@ impl LoadedVolume {
         Ok(Self { dims, samples })
     }
 
+    /// Decode a VolPack density file (`.den`): a 62-byte header (version 1,
+    /// in either byte order; original, extracted and map extents; warps;
+    /// sample count), then `u8` samples, x fastest.
+    pub fn from_den(bytes: &[u8]) -> Result<Self> {
+        const HEADER: usize = 62;
+        let header = bytes.get(..HEADER).with_context(|| {
+            format!("a .den file starts with a {HEADER}-byte header; this one has only {} bytes", bytes.len())
+        })?;
+        let swap = match [header[0], header[1]] {
+            [0, 1] => false,
+            [1, 0] => true,
+            v => bail!("not a VolPack .den file (version bytes {v:02x?}, expected 00 01 or 01 00)"),
+        };
+        let short = |i: usize| {
+            let b = [header[2 * i], header[2 * i + 1]];
+            if swap { i16::from_le_bytes(b) } else { i16::from_be_bytes(b) }
+        };
+        // Shorts: version, orig_min[3], orig_max[3], orig_len[3], extr_min[3],
+        // extr_max[3], extr_len[3], map_min[3], map_max[3], map_len[3], warps.
+        let len = [short(25), short(26), short(27)];
+        let w = [header[58], header[59], header[60], header[61]];
+        let count = if swap { i32::from_le_bytes(w) } else { i32::from_be_bytes(w) };
+        if len.iter().any(|&l| l <= 0) {
+            bail!("the .den header gives extents {len:?}; every extent must be positive");
+        }
+        let dims = Dims(len[0] as usize, len[1] as usize, len[2] as usize);
+        if i64::from(count) != (len[0] as i64) * (len[1] as i64) * (len[2] as i64) {
+            bail!("the .den header is inconsistent: {count} samples for extents {len:?}");
+        }
+        let body = &bytes[HEADER..];
+        let need = count as usize;
+        if body.len() < need {
+            bail!("the .den file is truncated: {} of {need} sample bytes after the header", body.len());
+        }
+        Ok(Self { dims, samples: Samples::U8(body[..need].to_vec()) })
+    }
+
+    /// Read a volume file whose format its name tells (`.den`).
+    pub fn read_known(path: &Path) -> Result<Option<Self>> {
+        match path.extension().and_then(|e| e.to_str()) {
+            Some("den") => {
+                let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+                Self::from_den(&bytes).with_context(|| format!("cannot load {}", path.display())).map(Some)
+            }
+            _ => Ok(None),
+        }
+    }
+
     /// Read a raw little-endian volume file.
     pub fn read_raw(path: &Path, dims: Dims, dtype: Dtype) -> Result<Self> {
         let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;

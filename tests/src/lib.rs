@@ -21,3 +21,15 @@ pub fn contour_demo(demo: Demo, n: usize, levels: &[f32], planes: &[Plane], thre
     let job = Job { planes, levels, traversal: Traversal::Corrected, threads, keep: true };
     contour_volume(&volume, &job, None).expect("contouring a demo")
 }
+
+/// Path of a cached real data file (fetched by `scripts/fetch-data`, which
+/// `scripts/test` runs first). Panics with the command to run when absent,
+/// so a missing file fails the test rather than skipping it.
+pub fn real_data(name: &str) -> std::path::PathBuf {
+    let dir = std::env::var_os("ISOSCOPE_DATA")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/isoscope-data"));
+    let path = dir.join(name);
+    assert!(path.is_file(), "{} is missing: run scripts/fetch-data (scripts/test does)", path.display());
+    path
+}
