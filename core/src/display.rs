@@ -386,7 +386,6 @@ where
     }
 }
 
-
 impl<P, F> DisplayStore<P, F>
 where
     P: AsRef<[ScreenPoint]> + AsMut<[ScreenPoint]>,
@@ -416,8 +415,15 @@ where
             ..Default::default()
         };
         let ScratchStore { a, b, c, d, edges, back, back_flags } = scratch;
-        let (vid, order, deg, adj, edges, back, back_flags) =
-            (a.as_mut(), b.as_mut(), c.as_mut(), d.as_mut(), edges.as_mut(), back.as_mut(), back_flags.as_mut());
+        let (vid, order, deg, adj, edges, back, back_flags) = (
+            a.as_mut(),
+            b.as_mut(),
+            c.as_mut(),
+            d.as_mut(),
+            edges.as_mut(),
+            back.as_mut(),
+            back_flags.as_mut(),
+        );
         let cap = self.capacity();
         if [vid.len(), order.len(), deg.len(), adj.len(), edges.len(), back.len(), back_flags.len()]
             .iter()
@@ -528,7 +534,8 @@ where
             ndropped: 0,
         };
         let mut merged = 0usize;
-        let other = |e: u64, v: u32| if (e >> 32) as u32 == v { (e & 0xFFFF_FFFF) as u32 } else { (e >> 32) as u32 };
+        let other =
+            |e: u64, v: u32| if (e >> 32) as u32 == v { (e & 0xFFFF_FFFF) as u32 } else { (e >> 32) as u32 };
         for pass in 0..2 {
             for v0 in 0..n as u32 {
                 if get(vid, v0 as usize) != v0 {
@@ -537,7 +544,9 @@ where
                 loop {
                     let free = |v: u32, edges: &[u64]| {
                         let (s, e) = (get(first, v as usize), end_of(first, v as usize));
-                        (s..e).filter(|&slot| get(edges, slots.get(slot as usize) as usize) >> 63 == 0).count()
+                        (s..e)
+                            .filter(|&slot| get(edges, slots.get(slot as usize) as usize) >> 63 == 0)
+                            .count()
                     };
                     let f = free(v0, edges);
                     if f == 0 || (pass == 0 && f % 2 == 0) {
@@ -744,7 +753,11 @@ where
     /// `cfg.passes` passes. The list is rewritten in the new order (closed
     /// loops rotated to start at their entry vertex). A scratch smaller than
     /// the list's capacity leaves the order as it is.
-    pub fn order<U, W, Q, G>(&mut self, scratch: &mut ScratchStore<U, W, Q, G>, cfg: &OrderConfig) -> OrderStats
+    pub fn order<U, W, Q, G>(
+        &mut self,
+        scratch: &mut ScratchStore<U, W, Q, G>,
+        cfg: &OrderConfig,
+    ) -> OrderStats
     where
         U: AsMut<[u32]>,
         W: AsMut<[u64]>,
@@ -758,7 +771,9 @@ where
             (a.as_mut(), b.as_mut(), c.as_mut(), d.as_mut(), back.as_mut(), back_flags.as_mut());
         let cap = self.capacity();
         let n = self.len;
-        if [starts.len(), taken.len(), seq.len(), how.len(), back.len(), back_flags.len()].iter().any(|&l| l < cap)
+        if [starts.len(), taken.len(), seq.len(), how.len(), back.len(), back_flags.len()]
+            .iter()
+            .any(|&l| l < cap)
             || n == 0
         {
             return stats;
@@ -845,7 +860,8 @@ where
         for _ in 0..cfg.passes {
             let mut improved = false;
             for i in 0..count {
-                let before_i = if i == 0 { cfg.start } else { ends(get(seq, i - 1) as usize, get(how, i - 1)).1 };
+                let before_i =
+                    if i == 0 { cfg.start } else { ends(get(seq, i - 1) as usize, get(how, i - 1)).1 };
                 let entry_i = ends(get(seq, i) as usize, get(how, i)).0;
                 for j in i + 1..count.min(i + 1 + cfg.window) {
                     let exit_j = ends(get(seq, j) as usize, get(how, j)).1;

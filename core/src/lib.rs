@@ -60,12 +60,14 @@
     )
 )]
 
+pub mod beam;
 pub mod command;
 pub mod contour;
 pub mod dac;
-pub mod display;
 pub mod demo;
+pub mod display;
 pub mod grid;
+pub mod mock_dac;
 pub mod pen;
 pub mod sample;
 pub mod screen;
@@ -74,3 +76,4 @@ pub mod surface;
 mod sweep;
 pub mod trace;
 pub mod tree;
+pub mod view;

@@ -105,7 +105,10 @@ fn dots_on_lines_and_repeated_dots_are_culled() {
     let st = l.optimize(&mut s, &OptimizeConfig::default());
     assert_eq!(st.culled_dots, 2);
     let cmds: Vec<_> = l.commands().collect();
-    assert_eq!(cmds, [Command::MoveTo(p(0.0, 0.0)), Command::LineTo(p(5.0, 0.0)), Command::Point(p(7.0, 7.0))]);
+    assert_eq!(
+        cmds,
+        [Command::MoveTo(p(0.0, 0.0)), Command::LineTo(p(5.0, 0.0)), Command::Point(p(7.0, 7.0))]
+    );
 }
 
 #[test]
