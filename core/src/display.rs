@@ -889,6 +889,91 @@ where
                 break;
             }
         }
+        // Or-opt: move single polylines (either way round) to where they
+        // cost least, within the window.
+        for _ in 0..cfg.passes {
+            let mut improved = false;
+            let mut i = 0;
+            while i < count {
+                let at = |k: usize| ends(get(seq, k) as usize, get(how, k));
+                let prev = if i == 0 { cfg.start } else { at(i - 1).1 };
+                let next = (i + 1 < count).then(|| at(i + 1).0);
+                let (e, x) = at(i);
+                let gain =
+                    dist(prev, e) + next.map_or(0.0, |n| dist(x, n)) - next.map_or(0.0, |n| dist(prev, n));
+                let p = get(seq, i) as usize;
+                let h = get(how, i);
+                let lo = i.saturating_sub(cfg.window);
+                let hi = (i + cfg.window).min(count);
+                // Insert after position j (j = usize::MAX: at the front).
+                let mut best: Option<(usize, u32, f32)> = None;
+                for j in lo..hi {
+                    if j == i || j + 1 == i {
+                        continue;
+                    }
+                    let a = at(j).1;
+                    let b = (j + 1 < count).then(|| at(j + 1).0).filter(|_| j + 1 != i);
+                    let b = if j + 1 == i { (i + 1 < count).then(|| at(i + 1).0) } else { b };
+                    for hh in [h, h ^ REVERSED] {
+                        if hh != h && closed(p) {
+                            continue;
+                        }
+                        let (e2, x2) = ends(p, hh);
+                        let cost =
+                            dist(a, e2) + b.map_or(0.0, |b| dist(x2, b)) - b.map_or(0.0, |b| dist(a, b));
+                        if cost + 1e-3 < gain && best.is_none_or(|(_, _, c)| cost < c) {
+                            best = Some((j, hh, cost));
+                        }
+                    }
+                }
+                if let Some((j, hh, _)) = best {
+                    let (sq, hw) = (get(seq, i), hh);
+                    if j > i {
+                        for k in i..j {
+                            set(seq, k, get(seq, k + 1));
+                            set(how, k, get(how, k + 1));
+                        }
+                        set(seq, j, sq);
+                        set(how, j, hw);
+                    } else {
+                        for k in (j + 1..i).rev() {
+                            set(seq, k + 1, get(seq, k));
+                            set(how, k + 1, get(how, k));
+                        }
+                        set(seq, j + 1, sq);
+                        set(how, j + 1, hw);
+                    }
+                    improved = true;
+                }
+                i += 1;
+            }
+            if !improved {
+                break;
+            }
+        }
+
+        // Enter each closed loop at the vertex that best serves both its
+        // neighbours (nearest neighbour only looked back).
+        for _ in 0..2 {
+            for k in 0..count {
+                let p = get(seq, k) as usize;
+                if !closed(p) {
+                    continue;
+                }
+                let prev = if k == 0 { cfg.start } else { ends(get(seq, k - 1) as usize, get(how, k - 1)).1 };
+                let next = (k + 1 < count).then(|| ends(get(seq, k + 1) as usize, get(how, k + 1)).0);
+                let (s, e) = range(p);
+                let mut best = (get(how, k), f32::INFINITY);
+                for v in s..e {
+                    let q = get(points, v);
+                    let c = dist(prev, q) + next.map_or(0.0, |nx| dist(q, nx));
+                    if c < best.1 {
+                        best = ((v - s) as u32, c);
+                    }
+                }
+                set(how, k, best.0);
+            }
+        }
         stats.blank_after = travel(seq, how);
 
         // Rewrite the list in the new order.

@@ -4,7 +4,12 @@
 //! - [`contour`]: parallel chicken-wire contouring of a volume into records,
 //!   and their CSV export.
 //! - [`progress`]: progress lines on a terminal for long work.
+//! - [`scene`]: a whole frame: contour, project, display list, cull,
+//!   stitch, order, beam schedule.
+//! - [`virtual_dac`]: the host's DAC, recording samples with their clock.
 
 pub mod contour;
 pub mod progress;
+pub mod scene;
+pub mod virtual_dac;
 pub mod volume;

@@ -2,11 +2,14 @@
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand, ValueEnum};
+use isoscope_core::beam::BeamConfig;
 use isoscope_core::grid::{Plane, Volume};
 use isoscope_core::sample::Sample;
 use isoscope_core::trace::Traversal;
+use isoscope_core::view::{Projection, View};
 use isoscope_sim::contour::{Job, contour_volume, work_units, write_csv};
 use isoscope_sim::progress::Progress;
+use isoscope_sim::scene::{self, Order, Scene, SceneConfig};
 use isoscope_sim::volume::{DemoSpec, Dims, Dtype, LoadedVolume, Samples};
 use std::io::Write;
 use std::path::PathBuf;
@@ -28,6 +31,74 @@ enum Cmd {
     /// Contour every slice of a volume (a chicken-wire surface) and export the
     /// drawing commands as CSV: level,axis,slice,op,x,y,z.
     Contour(ContourArgs),
+    /// Build one display frame (contour, project, cull, stitch, order,
+    /// schedule the beam) and print its statistics as key=value lines.
+    Stats(StatsArgs),
+}
+
+#[derive(Args, Debug)]
+struct ViewArgs {
+    /// Rotation about the vertical screen axis, degrees.
+    #[arg(long, default_value_t = View::DEFAULT.yaw, allow_hyphen_values = true)]
+    yaw: f32,
+    /// Rotation about the horizontal screen axis, degrees.
+    #[arg(long, default_value_t = View::DEFAULT.pitch, allow_hyphen_values = true)]
+    pitch: f32,
+    /// Rotation about the view axis, degrees.
+    #[arg(long, default_value_t = View::DEFAULT.roll, allow_hyphen_values = true)]
+    roll: f32,
+    /// Perspective projection with this field of view in degrees (default:
+    /// orthographic).
+    #[arg(long, value_name = "FOV")]
+    perspective: Option<f32>,
+    /// Fraction of the screen left free on each side.
+    #[arg(long, default_value_t = View::DEFAULT.margin)]
+    margin: f32,
+    /// DAC resolution in bits.
+    #[arg(long, default_value_t = 12)]
+    bits: u8,
+    /// Contour every N-th slice of each plane.
+    #[arg(long, default_value_t = 1, value_name = "N")]
+    every: usize,
+}
+
+#[derive(Args, Debug)]
+struct BeamArgs {
+    /// Largest step per sample while the beam is lit, in DAC LSB (sets the
+    /// beam speed and so the brightness).
+    #[arg(long, default_value_t = BeamConfig::default().lit_step)]
+    lit_step: f32,
+    /// DAC sample rate in samples per second, for frames per second.
+    #[arg(long, default_value_t = 1e6)]
+    rate: f32,
+    /// Polyline order: optimized (cull, stitch, order) or input (as
+    /// contoured, for comparison).
+    #[arg(long, value_enum, default_value = "optimized")]
+    order: OrderArg,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum OrderArg {
+    /// Cull duplicates, stitch, merge collinear runs, order for short jumps.
+    Optimized,
+    /// The contour fragments as they come.
+    Input,
+}
+
+#[derive(Args, Debug)]
+struct StatsArgs {
+    #[command(flatten)]
+    source: Source,
+    /// Contour level (repeatable). Default for a demo: its characteristic level.
+    #[arg(long = "level", value_name = "L", allow_hyphen_values = true, value_parser = parse_level)]
+    levels: Vec<f32>,
+    /// Slicing planes, comma-separated: xy, xz, yz.
+    #[arg(long, default_value = "xy,xz,yz", value_delimiter = ',')]
+    axes: Vec<String>,
+    #[command(flatten)]
+    view: ViewArgs,
+    #[command(flatten)]
+    beam: BeamArgs,
 }
 
 #[derive(Args, Debug)]
@@ -223,6 +294,64 @@ fn contour(args: &ContourArgs) -> Result<()> {
     Ok(())
 }
 
+fn levels_for(given: &[f32], demo: Option<DemoSpec>) -> Result<Vec<f32>> {
+    if !given.is_empty() {
+        return Ok(given.to_vec());
+    }
+    match demo {
+        Some(d) => Ok(vec![d.demo.default_level()]),
+        None => bail!("give at least one --level for a volume file"),
+    }
+}
+
+fn stats(args: &StatsArgs) -> Result<()> {
+    let (vol, demo) = load(&args.source)?;
+    let levels = levels_for(&args.levels, demo)?;
+    let planes = planes(&args.axes)?;
+    let v = &args.view;
+    if v.every == 0 {
+        bail!("--every must be at least 1");
+    }
+    let view = View {
+        yaw: v.yaw,
+        pitch: v.pitch,
+        roll: v.roll,
+        projection: match v.perspective {
+            Some(fov_deg) => Projection::Perspective { fov_deg },
+            None => Projection::Orthographic,
+        },
+        margin: v.margin,
+        bits: v.bits,
+        spacing: [1.0, 1.0, 1.0],
+    };
+    let beam = BeamConfig { bits: v.bits, lit_step: args.beam.lit_step, ..BeamConfig::default() };
+    let cfg = SceneConfig {
+        planes,
+        levels,
+        every: v.every,
+        view,
+        beam,
+        order: match args.beam.order {
+            OrderArg::Optimized => Order::Optimized,
+            OrderArg::Input => Order::Input,
+        },
+        ..SceneConfig::default()
+    };
+    let Dims(nx, ny, nz) = vol.dims;
+    fn run<T: Sample>(data: &[T], d: (usize, usize, usize), cfg: &SceneConfig) -> Result<Scene> {
+        scene::build(&Volume::new(data, d.0, d.1, d.2)?, cfg)
+    }
+    let d = (nx, ny, nz);
+    let scene = match &vol.samples {
+        Samples::U8(s) => run(s, d, &cfg),
+        Samples::U16(s) => run(s, d, &cfg),
+        Samples::I16(s) => run(s, d, &cfg),
+        Samples::F32(s) => run(s, d, &cfg),
+    }?;
+    print!("{}", scene.report(args.beam.rate));
+    Ok(())
+}
+
 fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
@@ -243,6 +372,7 @@ fn main() -> ExitCode {
     };
     let r = match &cli.command {
         Cmd::Contour(a) => contour(a),
+        Cmd::Stats(a) => stats(a),
     };
     match r {
         Ok(()) => ExitCode::SUCCESS,

@@ -565,3 +565,44 @@ fn every_error_has_the_isoscope_prefix() {
     assert_error(&["--demo", "nosuch:8"], &["nosuch"]);
     assert_error(&["--demo", "gyroid:1"], &["gyroid:1"]);
 }
+
+/// `stats` prints the frame statistics of the display pipeline.
+#[test]
+fn stats_reports_the_frame() {
+    let kv = |order: &str| -> std::collections::HashMap<String, f64> {
+        let out = run(&["stats", "--demo", "hydrogen:16", "--order", order]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        text(&out.stdout)
+            .lines()
+            .map(|l| {
+                let (k, v) = l.split_once('=').unwrap();
+                (k.to_string(), v.parse().unwrap())
+            })
+            .collect()
+    };
+    let (input, opt) = (kv("input"), kv("optimized"));
+    for k in ["fragments", "polylines", "points", "lit_length", "blank_length", "samples", "fps_at_1msps"] {
+        assert!(input.contains_key(k) && opt.contains_key(k), "{k} missing");
+    }
+    assert_eq!(input["fragments"], opt["fragments"]);
+    assert_eq!(input["fragments"], input["polylines"]);
+    assert!(opt["polylines"] < input["polylines"]);
+    assert!(opt["blank_length"] < input["blank_length"]);
+    assert!(opt["fps_at_1msps"] > input["fps_at_1msps"]);
+}
+
+#[test]
+fn stats_rejects_bad_view_and_beam_settings() {
+    for args in [
+        &["stats", "--demo", "gyroid:8", "--every", "0"][..],
+        &["stats", "--demo", "gyroid:8", "--bits", "0"],
+        &["stats", "--demo", "gyroid:8", "--lit-step", "-1"],
+        &["stats", "--demo", "gyroid:8", "--perspective", "200"],
+        &["stats", "--demo", "gyroid:8", "--margin", "0.7"],
+    ] {
+        let out = run(args);
+        assert!(!out.status.success(), "{args:?} succeeded");
+        assert!(text(&out.stderr).starts_with("isoscope-sim: error: "), "{args:?}: {}", text(&out.stderr));
+        assert!(!text(&out.stderr).contains("panicked"));
+    }
+}

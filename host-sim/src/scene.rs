@@ -1,0 +1,205 @@
+//! A whole frame on the host: contour the chosen slices, project them,
+//! build the display list, cull, stitch, merge, order, and schedule the beam.
+//!
+//! This is the pipeline the firmware runs, with `Vec` storage instead of
+//! fixed arrays; it is single-threaded on purpose, so that its timing says
+//! what one core (and, scaled, the MCU) would need.
+
+use anyhow::{Context, Result, anyhow};
+use isoscope_core::beam::{BeamConfig, FrameStats, Park, Scheduler, frame_stats};
+use isoscope_core::command::{Command, Point3};
+use isoscope_core::display::{
+    DisplayStore, OptimizeConfig, OptimizeStats, OrderConfig, OrderStats, ScratchStore,
+};
+use isoscope_core::grid::{Plane, Volume};
+use isoscope_core::sample::Sample;
+use isoscope_core::screen::ScreenPoint;
+use isoscope_core::surface::{SliceId, SurfaceSink, contour_slice};
+use isoscope_core::trace::Traversal;
+use isoscope_core::view::{Bounds, View, ViewTransform};
+use std::convert::Infallible;
+use std::time::Instant;
+
+/// How the polylines are ordered for the beam.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Order {
+    /// Cull, stitch, merge and order (the default).
+    #[default]
+    Optimized,
+    /// The contour fragments as they come, for comparison.
+    Input,
+}
+
+/// What to put on the screen.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SceneConfig {
+    /// Slicing planes.
+    pub planes: Vec<Plane>,
+    /// Contour levels.
+    pub levels: Vec<f32>,
+    /// Contour every `every`-th slice of each plane (1 = all).
+    pub every: usize,
+    /// The 3D view.
+    pub view: View,
+    /// The beam.
+    pub beam: BeamConfig,
+    /// Ordering.
+    pub order: Order,
+    /// Collinear merge tolerance, DAC units.
+    pub tolerance: f32,
+}
+
+impl Default for SceneConfig {
+    fn default() -> Self {
+        Self {
+            planes: Plane::ALL.to_vec(),
+            levels: vec![],
+            every: 1,
+            view: View::default(),
+            beam: BeamConfig::default(),
+            order: Order::Optimized,
+            tolerance: OptimizeConfig::default().tolerance,
+        }
+    }
+}
+
+/// A host display list: the core's `DisplayStore` over `Vec`s.
+pub type HostDisplayList = DisplayStore<Vec<ScreenPoint>, Vec<u8>>;
+
+/// A frame and what it took.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scene {
+    /// The display list, in drawing order.
+    pub list: HostDisplayList,
+    /// Contour fragments (polylines before stitching).
+    pub fragments: usize,
+    /// Culling and stitching.
+    pub optimize: Option<OptimizeStats>,
+    /// Ordering.
+    pub ordering: Option<OrderStats>,
+    /// The beam schedule of one frame in a refresh loop ([`refresh_stats`]).
+    pub frame: FrameStats,
+    /// Seconds: contouring with projection, optimisation, ordering.
+    pub seconds: [f64; 3],
+}
+
+struct Project<'a> {
+    view: &'a ViewTransform,
+    out: &'a mut Vec<Command<ScreenPoint>>,
+}
+
+impl SurfaceSink for Project<'_> {
+    type Error = Infallible;
+    fn command(&mut self, _: SliceId, _: usize, c: Command<Point3>) -> Result<(), Infallible> {
+        self.out.push(c.map(|p| self.view.project(p)));
+        Ok(())
+    }
+}
+
+/// Build one frame of `volume` as `cfg` says.
+pub fn build<T: Sample>(volume: &Volume<'_, T>, cfg: &SceneConfig) -> Result<Scene> {
+    if cfg.levels.is_empty() {
+        return Err(anyhow!("no contour level"));
+    }
+    if cfg.every == 0 {
+        return Err(anyhow!("the slice stride must be at least 1"));
+    }
+    cfg.beam.validate().context("invalid beam settings")?;
+    let (nx, ny, nz) = volume.dims();
+    let view = ViewTransform::fit(&cfg.view, Bounds::of_volume(nx, ny, nz)?).context("invalid view")?;
+    let t0 = Instant::now();
+    let mut commands = Vec::new();
+    for &plane in &cfg.planes {
+        for index in (0..volume.slice_count(plane)).step_by(cfg.every) {
+            let mut sink = Project { view: &view, out: &mut commands };
+            contour_slice(volume, SliceId { plane, index }, &cfg.levels, Traversal::Corrected, &mut sink)
+                .map_err(|e| anyhow!("contouring {plane} slice {index}: {e}"))?;
+        }
+    }
+    let cap = commands.len().max(1);
+    let mut list = DisplayStore::with_storage(vec![ScreenPoint::default(); cap], vec![0u8; cap]);
+    for c in commands {
+        list.push(c).map_err(|_| anyhow!("the display list is full"))?;
+    }
+    let fragments = list.polyline_count();
+    let t1 = Instant::now();
+    let (mut optimize, mut ordering) = (None, None);
+    let mut t2 = t1;
+    if cfg.order == Order::Optimized {
+        let mut scratch = ScratchStore::with_storage(
+            vec![0u32; cap],
+            vec![0u32; cap],
+            vec![0u32; cap],
+            vec![0u32; cap],
+            vec![0u64; cap],
+            vec![ScreenPoint::default(); cap],
+            vec![0u8; cap],
+        );
+        optimize = Some(list.optimize(&mut scratch, &OptimizeConfig { tolerance: cfg.tolerance }));
+        t2 = Instant::now();
+        let park = cfg.beam.park_sample();
+        let start = ScreenPoint::new(f32::from(park.x), f32::from(park.y));
+        ordering = Some(list.order(&mut scratch, &OrderConfig { start, ..OrderConfig::default() }));
+    }
+    let t3 = Instant::now();
+    let frame = refresh_stats(&list, &cfg.beam);
+    Ok(Scene {
+        list,
+        fragments,
+        optimize,
+        ordering,
+        frame,
+        seconds: [(t1 - t0).as_secs_f64(), (t2 - t1).as_secs_f64(), (t3 - t2).as_secs_f64()],
+    })
+}
+
+/// The beam schedule of one frame in a refresh loop: the frame starts where
+/// the same frame ended (no trip to the park position between frames; the
+/// park position is for idle time), so the closing jump of the loop counts
+/// as blanked travel.
+pub fn refresh_stats(list: &HostDisplayList, beam: &BeamConfig) -> FrameStats {
+    let Some(last) = list.polylines().last() else {
+        return frame_stats(list.commands(), beam);
+    };
+    let end = match (last.closed, last.points.first(), last.points.last()) {
+        (true, Some(&p), _) | (false, _, Some(&p)) => p,
+        _ => ScreenPoint::new(f32::NAN, f32::NAN),
+    };
+    let cfg = BeamConfig { park: Park { return_at_end: false, ..beam.park }, ..*beam };
+    let mut s = Scheduler::with_start(list.commands(), &cfg, end);
+    for _ in &mut s {}
+    s.stats()
+}
+
+impl Scene {
+    /// The frame statistics as `key=value` lines.
+    pub fn report(&self, sample_rate_hz: f32) -> String {
+        let f = &self.frame;
+        let mut s = String::new();
+        let mut kv = |k: &str, v: String| {
+            s.push_str(k);
+            s.push('=');
+            s.push_str(&v);
+            s.push('\n');
+        };
+        kv("fragments", self.fragments.to_string());
+        kv("polylines", self.list.polyline_count().to_string());
+        kv("points", self.list.len().to_string());
+        kv("dots", f.points.to_string());
+        kv("lit_length", format!("{:.1}", f.lit_length));
+        kv("blank_length", format!("{:.1}", f.blank_length));
+        kv("blank_ratio", format!("{:.4}", f.blank_length / f.lit_length.max(f32::MIN_POSITIVE)));
+        kv("samples", f.samples.to_string());
+        kv("lit_samples", f.lit_samples.to_string());
+        kv("fps_at_1msps", format!("{:.2}", f.fps(sample_rate_hz)));
+        if let Some(o) = &self.optimize {
+            kv("duplicate_segments", o.duplicate_segments.to_string());
+            kv("merged_points", o.merged_points.to_string());
+        }
+        kv("contour_ms", format!("{:.3}", self.seconds[0] * 1e3));
+        kv("optimize_ms", format!("{:.3}", self.seconds[1] * 1e3));
+        kv("order_ms", format!("{:.3}", self.seconds[2] * 1e3));
+        kv("pipeline_ms", format!("{:.3}", self.seconds.iter().sum::<f64>() * 1e3));
+        s
+    }
+}
