@@ -71,6 +71,8 @@ pub mod mock_dac;
 pub mod pen;
 pub mod sample;
 pub mod screen;
+#[cfg(feature = "embedded-hal")]
+pub mod spi_dac;
 pub mod subgrid;
 pub mod surface;
 mod sweep;

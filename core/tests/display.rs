@@ -170,7 +170,11 @@ proptest! {
         let mut s = Scratch::<128>::new();
         let st = l.optimize(&mut s, &OptimizeConfig { tolerance: 0.0 });
         prop_assert_eq!(&picture(&l), &before);
-        prop_assert!(st.polylines <= st.fragments.max(1));
+        // Each polyline draws at least one segment or is a dot. (Fewer
+        // polylines than fragments is typical but not guaranteed: the walk
+        // takes the straightest way through junctions rather than a
+        // minimum path cover.)
+        prop_assert!(st.polylines <= before.0.len() + before.1.len());
         prop_assert!((l.lit_length() - lit_before).abs() <= 1e-3 * lit_before.max(1.0));
         let o = l.order(&mut s, &OrderConfig::default());
         prop_assert_eq!(&picture(&l), &before);
