@@ -141,6 +141,53 @@ fn ordering_reverses_and_rotates_to_shorten_travel() {
     assert!((l.blank_length(p(0.0, 0.0)) - 81.0).abs() < 1e-3);
 }
 
+#[test]
+fn ordering_closes_the_refresh_loop() {
+    // A 4x4 grid of dots 10 apart: the shortest refresh loop visits them
+    // in a ring of 16 steps of 10, whatever the park position.
+    let mut l = DisplayList::<16>::new();
+    for k in 0..16u8 {
+        // Scrambled: 7k mod 16 visits every cell once.
+        let c = (7 * k) % 16;
+        l.push(Command::Point(p(1000.0 + 10.0 * f32::from(c % 4), 500.0 + 10.0 * f32::from(c / 4)))).unwrap();
+    }
+    let mut s = Scratch::<16>::new();
+    let st = l.order(&mut s, &OrderConfig::default());
+    assert!((l.cycle_blank_length() - 160.0).abs() < 1e-3, "{}", l.cycle_blank_length());
+    assert!((st.cycle_after - l.cycle_blank_length()).abs() < 1e-3);
+    assert!(st.cycle_after < st.cycle_before);
+    // The loop starts at the dot nearest the park position.
+    assert_eq!(l.polylines().next().unwrap().points[0], p(1000.0, 500.0));
+    assert!((st.blank_after - (p(0.0, 0.0).distance(p(1000.0, 500.0)) + 150.0)).abs() < 1e-2);
+}
+
+#[test]
+fn ordering_enters_loops_where_it_suits_both_neighbours() {
+    // Two squares side by side and a segment above: each square must be
+    // entered at a corner near its neighbours, not where it was stored.
+    let mut l = DisplayList::<32>::new();
+    let square = |l: &mut DisplayList<32>, x: f32, y: f32| {
+        l.push(Command::MoveTo(p(x + 10.0, y + 10.0))).unwrap();
+        for q in [p(x, y + 10.0), p(x, y), p(x + 10.0, y), p(x + 10.0, y + 10.0)] {
+            l.push(Command::LineTo(q)).unwrap();
+        }
+    };
+    square(&mut l, 100.0, 100.0);
+    square(&mut l, 130.0, 100.0);
+    l.push(Command::MoveTo(p(110.0, 130.0))).unwrap();
+    l.push(Command::LineTo(p(130.0, 130.0))).unwrap();
+    let before = picture(&l);
+    let mut s = Scratch::<32>::new();
+    l.optimize(&mut s, &OptimizeConfig::default());
+    assert_eq!(l.polylines().filter(|pl| pl.closed).count(), 2);
+    let st = l.order(&mut s, &OrderConfig::default());
+    assert_eq!(picture(&l), before);
+    // The loop: segment end (130,130) -> corner (130,110) 20, corner
+    // (110,110) of the other square 20, back to the segment (110,130) 20.
+    assert!((st.cycle_after - 60.0).abs() < 1e-3, "{st:?}");
+    assert!((l.cycle_blank_length() - 60.0).abs() < 1e-3);
+}
+
 fn arb_commands() -> impl Strategy<Value = Vec<Command<ScreenPoint>>> {
     // Points on a coarse lattice so fragments share endpoints often.
     let pt = (0u8..8, 0u8..8).prop_map(|(x, y)| p(f32::from(x) * 8.0, f32::from(y) * 8.0));
@@ -180,6 +227,41 @@ proptest! {
         prop_assert_eq!(&picture(&l), &before);
         prop_assert!(o.blank_after <= o.blank_nearest + 1e-2);
         prop_assert!((l.blank_length(OrderConfig::default().start) - o.blank_after).abs() < 1e-2);
+    }
+
+    #[test]
+    fn ordering_never_loses_to_nearest_neighbour(
+        cmds in arb_commands(),
+        start in (-20i16..80, -20i16..80),
+        window in 0usize..4,
+        passes in 0usize..4,
+        kicks in 0usize..60,
+        min_kicks in 0usize..200,
+        optimize in any::<bool>(),
+    ) {
+        let mut l = DisplayList::<128>::new();
+        for c in &cmds {
+            let _ = l.push(*c);
+        }
+        let mut s = Scratch::<128>::new();
+        if optimize {
+            l.optimize(&mut s, &OptimizeConfig { tolerance: 0.0 });
+        }
+        let before = picture(&l);
+        let (count, lit) = (l.polyline_count(), l.lit_length());
+        let start = p(f32::from(start.0), f32::from(start.1));
+        let cfg = OrderConfig { start, window, passes, kicks, min_kicks };
+        let o = l.order(&mut s, &cfg);
+        // The same picture, polyline for polyline.
+        prop_assert_eq!(&picture(&l), &before);
+        prop_assert_eq!(l.polyline_count(), count);
+        prop_assert!((l.lit_length() - lit).abs() <= 1e-3 * lit.max(1.0));
+        // Never worse than nearest neighbour, as a path from the start or
+        // as a refresh loop; the figures are those of the list.
+        prop_assert!(o.blank_after <= o.blank_nearest + 1e-2, "{:?}", o);
+        prop_assert!(o.cycle_after <= o.cycle_nearest + 1e-2, "{:?}", o);
+        prop_assert!((l.blank_length(start) - o.blank_after).abs() < 1e-2);
+        prop_assert!((l.cycle_blank_length() - o.cycle_after).abs() < 1e-2);
     }
 
     #[test]

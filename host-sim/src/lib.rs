@@ -7,8 +7,11 @@
 //! - [`scene`]: a whole frame: contour, project, display list, cull,
 //!   stitch, order, beam schedule.
 //! - [`virtual_dac`]: the host's DAC, recording samples with their clock.
+//! - [`phosphor`]: the screen: DAC samples rasterised as a CRT in XY mode
+//!   shows them (Gaussian spot, energy per sample, P31 green), to RGB and PNG.
 
 pub mod contour;
+pub mod phosphor;
 pub mod progress;
 pub mod scene;
 pub mod virtual_dac;

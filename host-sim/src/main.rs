@@ -8,6 +8,7 @@ use isoscope_core::sample::Sample;
 use isoscope_core::trace::Traversal;
 use isoscope_core::view::{Projection, View};
 use isoscope_sim::contour::{Job, contour_volume, work_units, write_csv};
+use isoscope_sim::phosphor::PhosphorConfig;
 use isoscope_sim::progress::Progress;
 use isoscope_sim::scene::{self, Order, Scene, SceneConfig};
 use isoscope_sim::volume::{DemoSpec, Dims, Dtype, LoadedVolume, Samples};
@@ -34,6 +35,28 @@ enum Cmd {
     /// Build one display frame (contour, project, cull, stitch, order,
     /// schedule the beam) and print its statistics as key=value lines.
     Stats(StatsArgs),
+    /// Render what the oscilloscope shows to a PNG: the frame's samples on a
+    /// simulated P31 phosphor (beam spot, brightness from beam speed, glow).
+    Render(RenderArgs),
+}
+
+#[derive(Args, Debug)]
+struct RenderArgs {
+    #[command(flatten)]
+    scene: StatsArgs,
+    /// Output PNG.
+    #[arg(short, long, default_value = "isoscope.png")]
+    output: PathBuf,
+    /// Image width and height in pixels.
+    #[arg(long, default_value_t = 1024)]
+    size: u32,
+    /// Brightness of blanked moves: 0 hides them (a scope with a Z input),
+    /// 0.05 shows them faintly (a scope without one).
+    #[arg(long, default_value_t = 0.0)]
+    show_blanked: f32,
+    /// Refresh the frame this many times on the phosphor (persistence).
+    #[arg(long, default_value_t = 1)]
+    frames: u32,
 }
 
 #[derive(Args, Debug)]
@@ -304,7 +327,36 @@ fn levels_for(given: &[f32], demo: Option<DemoSpec>) -> Result<Vec<f32>> {
     }
 }
 
-fn stats(args: &StatsArgs) -> Result<()> {
+fn render(args: &RenderArgs) -> Result<()> {
+    let scene = build_scene(&args.scene)?;
+    let mut cfg = PhosphorConfig::with_size(args.size, args.size);
+    cfg.bits = args.scene.view.bits;
+    cfg.show_blanked = args.show_blanked;
+    if args.frames == 0 {
+        bail!("--frames must be at least 1");
+    }
+    let beam = scene_beam(&args.scene);
+    let progress = Progress::new("rendering frames", args.frames as usize);
+    let screen = scene::render(&scene, &beam, cfg, args.frames, Some(&progress))?;
+    screen.write_png(&args.output).with_context(|| format!("cannot write {}", args.output.display()))?;
+    eprintln!(
+        "isoscope-sim: wrote {} ({}x{}; {} polylines, {} samples, {:.1} frames/s at {} samples/s)",
+        args.output.display(),
+        args.size,
+        args.size,
+        scene.list.polyline_count(),
+        scene.frame.samples,
+        scene.frame.fps(args.scene.beam.rate),
+        args.scene.beam.rate
+    );
+    Ok(())
+}
+
+fn scene_beam(args: &StatsArgs) -> BeamConfig {
+    BeamConfig { bits: args.view.bits, lit_step: args.beam.lit_step, ..BeamConfig::default() }
+}
+
+fn build_scene(args: &StatsArgs) -> Result<Scene> {
     let (vol, demo) = load(&args.source)?;
     let levels = levels_for(&args.levels, demo)?;
     let planes = planes(&args.axes)?;
@@ -324,13 +376,12 @@ fn stats(args: &StatsArgs) -> Result<()> {
         bits: v.bits,
         spacing: [1.0, 1.0, 1.0],
     };
-    let beam = BeamConfig { bits: v.bits, lit_step: args.beam.lit_step, ..BeamConfig::default() };
     let cfg = SceneConfig {
         planes,
         levels,
         every: v.every,
         view,
-        beam,
+        beam: scene_beam(args),
         order: match args.beam.order {
             OrderArg::Optimized => Order::Optimized,
             OrderArg::Input => Order::Input,
@@ -342,12 +393,16 @@ fn stats(args: &StatsArgs) -> Result<()> {
         scene::build(&Volume::new(data, d.0, d.1, d.2)?, cfg)
     }
     let d = (nx, ny, nz);
-    let scene = match &vol.samples {
+    match &vol.samples {
         Samples::U8(s) => run(s, d, &cfg),
         Samples::U16(s) => run(s, d, &cfg),
         Samples::I16(s) => run(s, d, &cfg),
         Samples::F32(s) => run(s, d, &cfg),
-    }?;
+    }
+}
+
+fn stats(args: &StatsArgs) -> Result<()> {
+    let scene = build_scene(args)?;
     print!("{}", scene.report(args.beam.rate));
     Ok(())
 }
@@ -373,6 +428,7 @@ fn main() -> ExitCode {
     let r = match &cli.command {
         Cmd::Contour(a) => contour(a),
         Cmd::Stats(a) => stats(a),
+        Cmd::Render(a) => render(a),
     };
     match r {
         Ok(()) => ExitCode::SUCCESS,

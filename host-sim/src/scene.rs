@@ -203,3 +203,26 @@ impl Scene {
         s
     }
 }
+
+/// Draw `frames` refreshes of the scene's frame on a simulated phosphor,
+/// through the beam scheduler, as the scope would show it.
+///
+/// # Errors
+/// An invalid picture configuration.
+pub fn render(
+    scene: &Scene,
+    beam: &BeamConfig,
+    picture: crate::phosphor::PhosphorConfig,
+    frames: u32,
+    progress: Option<&crate::progress::Progress>,
+) -> Result<crate::phosphor::Phosphor> {
+    let mut screen = crate::phosphor::Phosphor::new(picture).context("invalid picture settings")?;
+    for _ in 0..frames.max(1) {
+        screen.decay();
+        screen.deposit(Scheduler::new(scene.list.commands(), beam));
+        if let Some(p) = progress {
+            p.inc();
+        }
+    }
+    Ok(screen)
+}

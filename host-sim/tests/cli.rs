@@ -606,3 +606,35 @@ fn stats_rejects_bad_view_and_beam_settings() {
         assert!(!text(&out.stderr).contains("panicked"));
     }
 }
+
+/// `render` writes the PNG the scope would show.
+#[test]
+fn render_writes_a_png() {
+    let dir = TempDir::new("render");
+    let out_path = path_str(&dir.0.join("h.png"));
+    let out = run(&["render", "--demo", "hydrogen:12", "--size", "96", "-o", &out_path]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(text(&out.stderr).contains("wrote"), "{}", text(&out.stderr));
+    let bytes = std::fs::read(&out_path).unwrap();
+    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+    // IHDR: width and height 96.
+    assert_eq!(&bytes[16..24], &[0, 0, 0, 96, 0, 0, 0, 96]);
+}
+
+#[test]
+fn render_rejects_bad_picture_settings() {
+    let dir = TempDir::new("render-bad");
+    let out_path = path_str(&dir.0.join("h.png"));
+    for args in [
+        &["render", "--demo", "gyroid:8", "--size", "0", "-o", &out_path][..],
+        &["render", "--demo", "gyroid:8", "--size", "100000", "-o", &out_path],
+        &["render", "--demo", "gyroid:8", "--frames", "0", "-o", &out_path],
+        &["render", "--demo", "gyroid:8", "--show-blanked", "-1", "-o", &out_path],
+        &["render", "--demo", "gyroid:8", "-o", "/nonexistent-dir/x.png"],
+    ] {
+        let out = run(args);
+        assert!(!out.status.success(), "{args:?} succeeded");
+        assert!(text(&out.stderr).starts_with("isoscope-sim: error: "), "{args:?}: {}", text(&out.stderr));
+        assert!(!text(&out.stderr).contains("panicked"));
+    }
+}

@@ -46,20 +46,20 @@ fn hydrogen_32_meets_the_targets() {
     let (input, opt) = (demo(Demo::Hydrogen, 32, Order::Input), demo(Demo::Hydrogen, 32, Order::Optimized));
     assert_eq!((opt.fragments, opt.list.polyline_count()), (3728, 32));
     // Targets: blanked travel at most 5% of lit length; 50 frames/s at 1 MS/s.
-    check(&input, &opt, 0.05, 7102.1 * 1.02);
+    check(&input, &opt, 0.05, 5473.2 * 1.02);
     assert!(opt.frame.fps(1e6) >= 50.0, "{} fps", opt.frame.fps(1e6));
 }
 
 #[test]
 fn gyroid_48_meets_the_blank_target() {
     let (input, opt) = (demo(Demo::Gyroid, 48, Order::Input), demo(Demo::Gyroid, 48, Order::Optimized));
-    check(&input, &opt, 0.05, 68783.3 * 1.02);
+    check(&input, &opt, 0.05, 50625.9 * 1.02);
 }
 
 #[test]
 fn brain_mri_holds_its_blank_figure() {
     let (input, opt) = (brain(Order::Input), brain(Order::Optimized));
-    // 6.0% measured: many tiny loops of MRI noise, each one jump away.
-    // Above the 5% target; held here so that it can only improve.
-    check(&input, &opt, 0.061, 49243.2 * 1.02);
+    // 4.9% measured: many tiny loops of MRI noise, each one jump away,
+    // keep it the closest of the three to the 5% target.
+    check(&input, &opt, 0.05, 40374.8 * 1.02);
 }

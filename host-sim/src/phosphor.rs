@@ -1,0 +1,1300 @@
+//! The phosphor: what a CRT in XY mode shows for a stream of DAC samples.
+//!
+//! [`Phosphor`] is an additive `f32` energy buffer, one value a pixel, that
+//! DAC [`Sample`]s are deposited into (it is a [`Dac`] itself), and a tone
+//! mapping from that energy to an RGB picture of a green P31 screen, which
+//! it can encode as a PNG.
+//!
+//! # Geometry
+//!
+//! Codes `0 ..= 2^bits - 1` cover the whole image on both axes, y up: code
+//! `c` on X is at pixel coordinate `(c + 0.5) * width / 2^bits` (pixel `i`
+//! covers `i .. i + 1`, its centre is at `i + 0.5`), code `c` on Y at
+//! `height - (c + 0.5) * height / 2^bits`. So code 0 is in the bottom row,
+//! code `2^bits - 1` in the top row, and `(0, 2^bits - 1)` is the top-left
+//! corner. Energy that falls outside the image is lost (as it would be off
+//! the edge of the tube's graticule); codes above `2^bits - 1` land outside.
+//!
+//! # The physical model
+//!
+//! The beam moves from sample to sample at the DAC's clock, so each sample
+//! period it sweeps the straight step from sample `i - 1` to sample `i`. The
+//! beam current is constant, so **every step deposits the same energy**,
+//! [`PhosphorConfig::energy_per_sample`], whatever its length: spread
+//! uniformly along the step and blurred by the beam's Gaussian spot (standard
+//! deviation [`PhosphorConfig::spot_sigma`] pixels). A slow beam (short
+//! steps, many samples per unit of length) therefore draws a bright line and
+//! a fast one a dim line, as on a real tube, and a **dwell** (a sample at the
+//! same code as the one before) deposits its whole energy as a spot there.
+//!
+//! The intensity of step `i` is set by sample `i`'s beam: 1 for
+//! [`Beam::On`], [`PhosphorConfig::show_blanked`] for [`Beam::Off`] (0 for a
+//! scope whose Z input blanks the beam; a small value shows the faint jumps
+//! and settling spots of a scope without one). The very first sample (no
+//! step before it) is a spot. Repeated samples are merged into one spot of
+//! the summed energy (within one [`Phosphor::deposit`] call), so a huge dwell
+//! costs as much as a single one.
+//!
+//! A step from `a` to `b` of length `L > 0`, energy `E`, deposits at a pixel
+//! centre at distance `d` from the line through `a` and `b`, and at
+//! coordinate `u` along it (`u = 0` at `a`, `u = L` at `b`), the exact
+//! integral of the spot along the step:
+//!
+//! ```text
+//! E / L * ∫_0^L G(u - s, d) ds
+//!   = E * exp(-d² / 2σ²) / (√(2π) σ) * [erf(u / (√2 σ)) - erf((u - L) / (√2 σ))] / (2 L)
+//! ```
+//!
+//! with `G` the normalised 2D Gaussian, and a spot (`L = 0`, or `L` below
+//! 1/1000 of `σ`, where the difference of erfs would lose precision) deposits
+//! `E * exp(-r² / 2σ²) / (2π σ²)`. Values are point samples at pixel centres
+//! (per unit of area, a pixel being one unit), so the total over the image
+//! is the energy deposited as long as the spot is not much narrower than a
+//! pixel (`σ >= 0.7` keeps the sum within 0.1% of the integral). Each step
+//! is evaluated only within [`WINDOW_SIGMAS`] `σ` of the segment (a rotated
+//! rectangle, walked row by row), which keeps more than 99.9% of its energy.
+//!
+//! `erf` is Abramowitz and Stegun's formula 7.1.26
+//! (`1 - (a1 t + ... + a5 t^5) exp(-x²)`, `t = 1 / (1 + p x)`), absolute
+//! error below `1.5e-7`, below `5e-7` as evaluated here in `f32`; `exp` is a
+//! branch-free `2^n e^f` with a polynomial for `e^f` (relative error below
+//! `3e-7`).
+//! Both are plain arithmetic, so the per-row loop over pixels runs as a
+//! vector loop (SSE2 on the baseline x86-64 target). Unit tests check both
+//! errors against references.
+//!
+//! # Tone mapping
+//!
+//! [`Phosphor::to_rgb8`] adds an optional glow (a wide, low Gaussian halo:
+//! [`Glow`]) to the energy `E` of each pixel, then maps it to a display
+//! value `t = (1 - exp(-exposure * E))^(1 / gamma)`, a saturating curve like
+//! film or an eye, then `t` through the [`Palette`] (P31 green by default,
+//! whitish at saturation). Frames can be accumulated: [`Phosphor::decay`]
+//! multiplies the buffer by [`PhosphorConfig::persistence`] before the next
+//! frame is deposited.
+//!
+//! # Example
+//!
+//! ```
+//! use isoscope_core::dac::{Beam, Sample};
+//! use isoscope_sim::phosphor::{Phosphor, PhosphorConfig};
+//!
+//! let mut screen = Phosphor::new(PhosphorConfig::with_size(64, 64)).unwrap();
+//! // A horizontal line across the middle, 16 LSB a sample.
+//! screen.deposit((0..=255).map(|k| Sample::new(k * 16, 2048, Beam::On)));
+//! let rgb = screen.to_rgb8();
+//! assert_eq!(rgb.len(), 64 * 64 * 3);
+//! let png = screen.encode_png();
+//! assert_eq!(&png[1..4], b"PNG");
+//! ```
+
+use isoscope_core::dac::{Beam, Dac, Sample};
+use std::convert::Infallible;
+use std::fmt;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::Path;
+
+/// Largest accepted image width or height, in pixels.
+pub const MAX_SIZE: u32 = 8192;
+
+/// Largest accepted [`PhosphorConfig::spot_sigma`] and [`Glow::radius`], in
+/// pixels.
+pub const MAX_SIGMA: f32 = 256.0;
+
+/// How far from a segment, in spot standard deviations, its energy is
+/// evaluated. A 2D Gaussian keeps more than 99.9% of its mass within 3.5 σ
+/// of its centre on each axis; beyond, the spot is below 0.22% of its peak.
+pub const WINDOW_SIGMAS: f32 = 3.5;
+
+/// The size the [default](PhosphorConfig::default) configuration is tuned
+/// for; [`PhosphorConfig::with_size`] scales from it.
+pub const REFERENCE_SIZE: u32 = 1024;
+
+/// A halo around bright lines: a wide Gaussian blur of the energy, added on
+/// top at [`Glow::strength`] times its value (light scattered in the glass
+/// and the phosphor, and the eye's own glare).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Glow {
+    /// Weight of the blurred energy added to the energy (`>= 0`, finite;
+    /// 0 turns the glow off). Energy is conserved by the blur, so a strength
+    /// of 0.1 adds 10% of the picture's energy, spread thin.
+    pub strength: f32,
+    /// Standard deviation of the blur, in pixels (`> 0` and at most
+    /// [`MAX_SIGMA`] when `strength > 0`).
+    pub radius: f32,
+}
+
+/// A colour ramp from the display value `t` in `0 ..= 1` to RGB.
+///
+/// `stops` are `(t, [r, g, b])`, `t` non-decreasing in `0 ..= 1`, colours in
+/// `0 ..= 1` (display values, as written to the PNG). Between two stops the
+/// colour is interpolated linearly; before the first stop it is the first
+/// colour, after the last the last.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Palette {
+    /// The stops, at least one.
+    pub stops: Vec<(f32, [f32; 3])>,
+}
+
+impl Palette {
+    /// P31 (the common green oscilloscope phosphor, ZnS:Cu, emission peak
+    /// near 530 nm), as a screen looks to the eye or a camera:
+    ///
+    /// | t | colour | |
+    /// |---|---|---|
+    /// | 0 | (0, 0, 0) | the unlit screen |
+    /// | 0.5 | (0.1, 0.6, 0.2) | a dim trace: saturated green |
+    /// | 0.85 | (0.6, 1.0, 0.6) | a bright trace: pale green |
+    /// | 1 | (0.9, 1.0, 0.9) | saturation: a whitish-green core |
+    ///
+    /// P31's chromaticity (x ≈ 0.23, y ≈ 0.53) is outside sRGB; the nearest
+    /// sRGB colour is a slightly bluish green. A dim trace shows it; at
+    /// high intensity the eye's green cones (and a camera's green channel)
+    /// saturate while red and blue keep rising, so the core of a bright line
+    /// or a dwell spot looks whitish green, which the upper stops imitate.
+    pub fn p31() -> Self {
+        Self {
+            stops: vec![
+                (0.0, [0.0, 0.0, 0.0]),
+                (0.5, [0.1, 0.6, 0.2]),
+                (0.85, [0.6, 1.0, 0.6]),
+                (1.0, [0.9, 1.0, 0.9]),
+            ],
+        }
+    }
+
+    /// Black to white.
+    pub fn gray() -> Self {
+        Self { stops: vec![(0.0, [0.0; 3]), (1.0, [1.0; 3])] }
+    }
+
+    /// The colour at display value `t` (clamped into `0 ..= 1`; NaN is 0).
+    pub fn color(&self, t: f32) -> [f32; 3] {
+        let t = if t.is_nan() { 0.0 } else { t.clamp(0.0, 1.0) };
+        let Some(&(t0, c0)) = self.stops.first() else {
+            return [0.0; 3];
+        };
+        if t <= t0 {
+            return c0;
+        }
+        let mut prev = (t0, c0);
+        for &(t1, c1) in &self.stops[1..] {
+            if t <= t1 {
+                let f = if t1 > prev.0 { (t - prev.0) / (t1 - prev.0) } else { 1.0 };
+                return [0, 1, 2].map(|k| prev.1[k] + (c1[k] - prev.1[k]) * f);
+            }
+            prev = (t1, c1);
+        }
+        prev.1
+    }
+
+    fn validate(&self) -> Result<(), PhosphorError> {
+        if self.stops.is_empty() {
+            return Err(PhosphorError::BadPalette("no stops"));
+        }
+        let mut last = 0.0;
+        for &(t, c) in &self.stops {
+            if !(0.0..=1.0).contains(&t) {
+                return Err(PhosphorError::BadPalette("a stop position is not in 0..=1"));
+            }
+            if t < last {
+                return Err(PhosphorError::BadPalette("stop positions decrease"));
+            }
+            last = t;
+            if !c.iter().all(|v| (0.0..=1.0).contains(v)) {
+                return Err(PhosphorError::BadPalette("a stop colour is not in 0..=1"));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Default for Palette {
+    /// [`Palette::p31`].
+    fn default() -> Self {
+        Self::p31()
+    }
+}
+
+/// How the screen is rendered. See the [module docs](self) for the model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PhosphorConfig {
+    /// Image width in pixels, `1 ..= MAX_SIZE`.
+    pub width: u32,
+    /// Image height in pixels, `1 ..= MAX_SIZE`.
+    pub height: u32,
+    /// DAC resolution in bits, `1 ..= 16`: codes `0 ..= 2^bits - 1` span the
+    /// image.
+    pub bits: u8,
+    /// Standard deviation of the beam's Gaussian spot, in pixels (finite,
+    /// `0 < σ <= MAX_SIGMA`; below ~0.7 the spot falls between pixel centres
+    /// and lines look dotted).
+    pub spot_sigma: f32,
+    /// Energy one sample deposits (finite, `>= 0`): the unit of the energy
+    /// buffer.
+    pub energy_per_sample: f32,
+    /// Tone-mapping scale: a pixel of energy `E` shows
+    /// `1 - exp(-exposure * E)` of full brightness before gamma (finite,
+    /// `> 0`).
+    pub exposure: f32,
+    /// Display gamma (finite, `> 0`): the tone-mapped value is raised to
+    /// `1 / gamma`.
+    pub gamma: f32,
+    /// The halo.
+    pub glow: Glow,
+    /// Fraction of the energy [`Phosphor::decay`] keeps, `0 ..= 1`.
+    pub persistence: f32,
+    /// Display value to colour.
+    pub palette: Palette,
+    /// Intensity of blanked samples relative to lit ones, `0 ..= 1`: 0 for a
+    /// scope with a Z input (blanked moves are invisible), e.g. 0.05 for a
+    /// scope without one (faint jump lines and settling spots).
+    pub show_blanked: f32,
+}
+
+impl Default for PhosphorConfig {
+    /// [`PhosphorConfig::with_size`]`(1024, 1024)`:
+    ///
+    /// - `bits: 12`, the beam scheduler's default DAC.
+    /// - `spot_sigma: 1.25` px: a ~0.5 mm spot (full width at half maximum
+    ///   ≈ 2.35 σ) on a ~10 cm screen is ~5 px of 1024, i.e. σ ≈ 2; 1.25
+    ///   keeps the lines crisp at that size while still smooth (no aliasing:
+    ///   the scheduler's 16 LSB steps are 4 px, the line is continuous).
+    /// - `energy_per_sample: 1.0`: the buffer counts samples.
+    /// - `exposure: 4.0`: a line drawn at the scheduler's default speed
+    ///   (16 LSB = 4 px a sample, so 0.25 samples a pixel of length, peak
+    ///   0.25 / (√(2π) σ) = 0.08 a pixel) tone-maps to 0.27, shown at 0.55
+    ///   after gamma: a bright, saturated green line. Two lines crossing (or
+    ///   lying close, at a surface's silhouette) show at 0.71, pale green,
+    ///   and the scheduler's dwell spots (2 samples at a polyline's start, 4
+    ///   for a dot) at 0.8 to 0.95, towards the whitish core. Tuned by eye
+    ///   on the hydrogen demo (32³, level 0.1, default view and beam: about
+    ///   15,000 samples).
+    /// - `gamma: 2.2`, as for sRGB.
+    /// - `glow: { strength: 0.04, radius: 6.0 }`: a faint halo 6 px wide,
+    ///   visible around bright spots and dense bundles of lines, invisible
+    ///   elsewhere; much more makes the picture look out of focus.
+    /// - `persistence: 0.05`: P31 falls to 10% of its brightness within
+    ///   tens of microseconds, and to a long low tail after that; at a 50 Hz
+    ///   refresh about 5% of a frame still shows (faint trails behind moving
+    ///   lines in a dark room).
+    /// - `palette: Palette::p31()`.
+    /// - `show_blanked: 0.0`: a scope with a Z input.
+    fn default() -> Self {
+        Self::with_size(REFERENCE_SIZE, REFERENCE_SIZE)
+    }
+}
+
+impl PhosphorConfig {
+    /// The default look at another image size: `spot_sigma` and the glow
+    /// radius scale with `min(width, height) / 1024` (the spot no narrower
+    /// than 0.75 px, the glow no narrower than 1 px), and `exposure` so that
+    /// a line keeps its brightness (a line's peak energy goes as one over
+    /// pixels per LSB times `spot_sigma`).
+    pub fn with_size(width: u32, height: u32) -> Self {
+        let scale = width.min(height).max(1) as f32 / REFERENCE_SIZE as f32;
+        let spot_sigma = (1.25 * scale).max(0.75);
+        Self {
+            width,
+            height,
+            bits: 12,
+            spot_sigma,
+            energy_per_sample: 1.0,
+            exposure: 4.0 * scale * spot_sigma / 1.25,
+            gamma: 2.2,
+            glow: Glow { strength: 0.04, radius: (6.0 * scale).max(1.0) },
+            persistence: 0.05,
+            palette: Palette::p31(),
+            show_blanked: 0.0,
+        }
+    }
+
+    /// Check every field.
+    ///
+    /// # Errors
+    /// The first field out of its documented range.
+    pub fn validate(&self) -> Result<(), PhosphorError> {
+        let (width, height) = (self.width, self.height);
+        if width == 0 || height == 0 {
+            return Err(PhosphorError::ZeroSize { width, height });
+        }
+        if width > MAX_SIZE || height > MAX_SIZE {
+            return Err(PhosphorError::TooLarge { width, height });
+        }
+        if !(1..=16).contains(&self.bits) {
+            return Err(PhosphorError::BadBits(self.bits));
+        }
+        if !(self.spot_sigma > 0.0 && self.spot_sigma <= MAX_SIGMA) {
+            return Err(PhosphorError::BadSigma(self.spot_sigma));
+        }
+        if !(self.energy_per_sample.is_finite() && self.energy_per_sample >= 0.0) {
+            return Err(PhosphorError::BadEnergy(self.energy_per_sample));
+        }
+        if !(self.exposure.is_finite() && self.exposure > 0.0) {
+            return Err(PhosphorError::BadExposure(self.exposure));
+        }
+        if !(self.gamma.is_finite() && self.gamma > 0.0) {
+            return Err(PhosphorError::BadGamma(self.gamma));
+        }
+        let Glow { strength, radius } = self.glow;
+        let radius_ok = radius > 0.0 && radius <= MAX_SIGMA;
+        if !(strength.is_finite() && strength >= 0.0 && (strength == 0.0 || radius_ok)) {
+            return Err(PhosphorError::BadGlow { strength, radius });
+        }
+        if !(0.0..=1.0).contains(&self.persistence) {
+            return Err(PhosphorError::BadPersistence(self.persistence));
+        }
+        if !(0.0..=1.0).contains(&self.show_blanked) {
+            return Err(PhosphorError::BadShowBlanked(self.show_blanked));
+        }
+        self.palette.validate()
+    }
+}
+
+/// Why a phosphor could not be made or its picture written.
+#[derive(Debug)]
+#[non_exhaustive]
+pub enum PhosphorError {
+    /// The image has no pixels.
+    ZeroSize {
+        /// Width asked for.
+        width: u32,
+        /// Height asked for.
+        height: u32,
+    },
+    /// The image is wider or taller than [`MAX_SIZE`].
+    TooLarge {
+        /// Width asked for.
+        width: u32,
+        /// Height asked for.
+        height: u32,
+    },
+    /// DAC resolution outside `1 ..= 16` bits.
+    BadBits(u8),
+    /// Spot size not finite, not positive, or above [`MAX_SIGMA`].
+    BadSigma(f32),
+    /// Energy per sample not finite or negative.
+    BadEnergy(f32),
+    /// Exposure not finite or not positive.
+    BadExposure(f32),
+    /// Gamma not finite or not positive.
+    BadGamma(f32),
+    /// Glow strength not finite or negative, or (with a non-zero strength)
+    /// radius not in `0 < radius <= MAX_SIGMA`.
+    BadGlow {
+        /// Strength asked for.
+        strength: f32,
+        /// Radius asked for.
+        radius: f32,
+    },
+    /// Persistence not in `0 ..= 1`.
+    BadPersistence(f32),
+    /// Blanked intensity not in `0 ..= 1`.
+    BadShowBlanked(f32),
+    /// An invalid palette, and why.
+    BadPalette(&'static str),
+    /// The PNG file could not be written.
+    Io(std::io::Error),
+    /// The PNG encoder failed.
+    Png(png::EncodingError),
+}
+
+impl fmt::Display for PhosphorError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::ZeroSize { width, height } => write!(f, "image size {width}x{height} has no pixels"),
+            Self::TooLarge { width, height } => {
+                write!(f, "image size {width}x{height} is larger than {MAX_SIZE}x{MAX_SIZE}")
+            }
+            Self::BadBits(b) => write!(f, "DAC resolution {b} bits is not in 1..=16"),
+            Self::BadSigma(s) => write!(f, "spot sigma {s} px is not in (0, {MAX_SIGMA}]"),
+            Self::BadEnergy(e) => write!(f, "energy per sample {e} is not a finite non-negative number"),
+            Self::BadExposure(e) => write!(f, "exposure {e} is not a finite positive number"),
+            Self::BadGamma(g) => write!(f, "gamma {g} is not a finite positive number"),
+            Self::BadGlow { strength, radius } => write!(
+                f,
+                "glow strength {strength} must be finite and >= 0, and with it the radius {radius} px \
+                 in (0, {MAX_SIGMA}]"
+            ),
+            Self::BadPersistence(p) => write!(f, "persistence {p} is not in 0..=1"),
+            Self::BadShowBlanked(s) => write!(f, "blanked intensity {s} is not in 0..=1"),
+            Self::BadPalette(why) => write!(f, "invalid palette: {why}"),
+            Self::Io(e) => write!(f, "cannot write the PNG file: {e}"),
+            Self::Png(e) => write!(f, "cannot encode the PNG: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for PhosphorError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            Self::Io(e) => Some(e),
+            Self::Png(e) => Some(e),
+            _ => None,
+        }
+    }
+}
+
+impl From<png::EncodingError> for PhosphorError {
+    fn from(e: png::EncodingError) -> Self {
+        match e {
+            png::EncodingError::IoError(e) => Self::Io(e),
+            e => Self::Png(e),
+        }
+    }
+}
+
+/// Entries of the tone-mapping table, over `1 - exp(-exposure * E)` in
+/// `0 ..= 1`.
+const LUT_SIZE: usize = 1 << 14;
+
+/// The screen: an energy buffer, the beam's last position, and the tone
+/// mapping. See the [module docs](self).
+#[derive(Debug, Clone)]
+pub struct Phosphor {
+    cfg: PhosphorConfig,
+    width: usize,
+    height: usize,
+    energy: Vec<f32>,
+    /// The last sample deposited: where the beam is.
+    prev: Option<Sample>,
+    /// Pixels per code on X and on Y.
+    px_per_code: (f32, f32),
+    /// `1 / (2 σ²)`.
+    inv_2s2: f32,
+    /// `1 / (√2 σ)`.
+    inv_sqrt2_s: f32,
+    /// `1 / (√(2π) σ)`.
+    norm1: f32,
+    /// `1 / (2π σ²)`.
+    norm2: f32,
+    /// [`WINDOW_SIGMAS`] σ.
+    reach: f32,
+    /// Display value table: `1 - exp(-exposure * E)` to RGB.
+    lut: Vec<[u8; 3]>,
+    /// Per-column Gaussian factors of a spot.
+    scratch: Vec<f32>,
+}
+
+impl Phosphor {
+    /// A black screen.
+    ///
+    /// # Errors
+    /// [`PhosphorConfig::validate`]'s.
+    pub fn new(cfg: PhosphorConfig) -> Result<Self, PhosphorError> {
+        cfg.validate()?;
+        let (width, height) = (cfg.width as usize, cfg.height as usize);
+        let codes = (1u32 << cfg.bits) as f32;
+        let s = cfg.spot_sigma;
+        let inv_gamma = 1.0 / cfg.gamma;
+        let lut = (0..LUT_SIZE)
+            .map(|i| {
+                let v = i as f32 / (LUT_SIZE - 1) as f32;
+                cfg.palette.color(v.powf(inv_gamma)).map(|c| (c * 255.0 + 0.5) as u8)
+            })
+            .collect();
+        Ok(Self {
+            width,
+            height,
+            energy: vec![0.0; width * height],
+            prev: None,
+            px_per_code: (cfg.width as f32 / codes, cfg.height as f32 / codes),
+            inv_2s2: 1.0 / (2.0 * s * s),
+            inv_sqrt2_s: 1.0 / (std::f32::consts::SQRT_2 * s),
+            norm1: 1.0 / ((2.0 * std::f32::consts::PI).sqrt() * s),
+            norm2: 1.0 / (2.0 * std::f32::consts::PI * s * s),
+            reach: WINDOW_SIGMAS * s,
+            lut,
+            scratch: Vec::new(),
+            cfg,
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &PhosphorConfig {
+        &self.cfg
+    }
+
+    /// Image width in pixels.
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    /// Image height in pixels.
+    pub fn height(&self) -> usize {
+        self.height
+    }
+
+    /// The energy of every pixel, row by row from the top, in units of
+    /// [`PhosphorConfig::energy_per_sample`] per pixel.
+    pub fn energy(&self) -> &[f32] {
+        &self.energy
+    }
+
+    /// The sum of [`Phosphor::energy`].
+    pub fn total_energy(&self) -> f64 {
+        self.energy.iter().map(|&e| f64::from(e)).sum()
+    }
+
+    /// The last sample deposited (where the beam is), if any since the
+    /// phosphor was made or cleared.
+    pub fn beam(&self) -> Option<Sample> {
+        self.prev
+    }
+
+    /// Deposit samples, in order, one DAC tick each (see the
+    /// [module docs](self)). The beam's position is kept across calls, so a
+    /// frame can be streamed in chunks.
+    pub fn deposit(&mut self, samples: impl IntoIterator<Item = Sample>) {
+        let blanked = self.cfg.show_blanked;
+        // Energy (in samples) waiting to be deposited as a spot at `prev`.
+        let mut spot = 0.0f64;
+        for s in samples {
+            let w = match s.beam {
+                Beam::On => 1.0,
+                Beam::Off => blanked,
+            };
+            match self.prev {
+                Some(p) if (p.x, p.y) != (s.x, s.y) => {
+                    self.flush_spot(p, spot);
+                    spot = 0.0;
+                    if w > 0.0 {
+                        let e = w * self.cfg.energy_per_sample;
+                        self.segment(self.position(p), self.position(s), e);
+                    }
+                }
+                _ => spot += f64::from(w),
+            }
+            self.prev = Some(s);
+        }
+        if let Some(p) = self.prev {
+            self.flush_spot(p, spot);
+        }
+    }
+
+    /// Let the phosphor fade between frames: multiply every pixel's energy by
+    /// [`PhosphorConfig::persistence`].
+    pub fn decay(&mut self) {
+        let k = self.cfg.persistence;
+        self.energy.iter_mut().for_each(|e| *e *= k);
+    }
+
+    /// A black screen again, and no beam position (the next sample is a
+    /// spot).
+    pub fn clear(&mut self) {
+        self.energy.fill(0.0);
+        self.prev = None;
+    }
+
+    /// The picture: `width * height` RGB pixels, 8 bits a channel, row by row
+    /// from the top. Glow, then `t = (1 - exp(-exposure * E))^(1 / gamma)`,
+    /// then the palette.
+    pub fn to_rgb8(&self) -> Vec<u8> {
+        let glow = self.cfg.glow;
+        // The energy seen, glow included.
+        let seen = if glow.strength > 0.0 {
+            let mut halo = blur(&self.energy, self.width, self.height, glow.radius);
+            for (h, &e) in halo.iter_mut().zip(&self.energy) {
+                *h = e + glow.strength * *h;
+            }
+            halo
+        } else {
+            self.energy.clone()
+        };
+        // To table indices (a vector loop), then colours.
+        let (exposure, top) = (self.cfg.exposure, (LUT_SIZE - 1) as f32);
+        let index: Vec<u32> = seen
+            .iter()
+            // `v` is in 0..=1 (NaN only for a NaN energy, which `as` maps to 0).
+            .map(|&e| ((1.0 - exp_neg(-exposure * e)) * top + 0.5).clamp(0.0, top) as u32)
+            .collect();
+        let mut out = vec![0u8; seen.len() * 3];
+        for (px, &i) in out.chunks_exact_mut(3).zip(&index) {
+            px.copy_from_slice(&self.lut[(i as usize).min(LUT_SIZE - 1)]);
+        }
+        out
+    }
+
+    /// The picture as an 8-bit RGB PNG file.
+    ///
+    /// # Errors
+    /// [`PhosphorError::Io`] if the file cannot be created or written,
+    /// [`PhosphorError::Png`] if the encoder fails.
+    pub fn write_png(&self, path: impl AsRef<Path>) -> Result<(), PhosphorError> {
+        let mut file = BufWriter::new(File::create(path).map_err(PhosphorError::Io)?);
+        self.png_to(&mut file)?;
+        file.flush().map_err(PhosphorError::Io)
+    }
+
+    /// The picture as the bytes of an 8-bit RGB PNG file.
+    pub fn encode_png(&self) -> Vec<u8> {
+        let mut out = Vec::new();
+        // Writing to a `Vec` cannot fail, and the header always matches the
+        // data (a validated size, three bytes a pixel).
+        self.png_to(&mut out).expect("PNG encoding into memory cannot fail");
+        out
+    }
+
+    fn png_to<W: Write>(&self, w: W) -> Result<(), png::EncodingError> {
+        let mut enc = png::Encoder::new(w, self.cfg.width, self.cfg.height);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Eight);
+        let mut writer = enc.write_header()?;
+        writer.write_image_data(&self.to_rgb8())?;
+        writer.finish()
+    }
+
+    /// A sample's position in pixel coordinates (y down).
+    fn position(&self, s: Sample) -> (f32, f32) {
+        let (kx, ky) = self.px_per_code;
+        ((f32::from(s.x) + 0.5) * kx, self.height as f32 - (f32::from(s.y) + 0.5) * ky)
+    }
+
+    fn flush_spot(&mut self, at: Sample, samples: f64) {
+        let e = samples * f64::from(self.cfg.energy_per_sample);
+        if e > 0.0 {
+            self.spot(self.position(at), e as f32);
+        }
+    }
+
+    /// The pixel index range whose centres `i + 0.5` lie in `lo ..= hi`,
+    /// within `0 .. n`; `None` if empty.
+    fn pixel_range(lo: f32, hi: f32, n: usize) -> Option<(usize, usize)> {
+        // NaN compares false: an empty range.
+        if lo.is_nan() || hi.is_nan() || lo > hi {
+            return None;
+        }
+        // `as` saturates, so huge or infinite bounds are safe.
+        let first = ceil_i64(lo - 0.5).max(0);
+        let last = floor_i64(hi - 0.5).min(n as i64 - 1);
+        (first <= last).then_some((first as usize, last as usize))
+    }
+
+    /// A Gaussian spot of energy `e` at `c`.
+    fn spot(&mut self, c: (f32, f32), e: f32) {
+        let r = self.reach;
+        let (Some((i0, i1)), Some((j0, j1))) = (
+            Self::pixel_range(c.0 - r, c.0 + r, self.width),
+            Self::pixel_range(c.1 - r, c.1 + r, self.height),
+        ) else {
+            return;
+        };
+        let a = self.inv_2s2;
+        let mut gx = std::mem::take(&mut self.scratch);
+        gx.clear();
+        gx.extend((i0..=i1).map(|i| {
+            let d = i as f32 + 0.5 - c.0;
+            exp_neg(-d * d * a)
+        }));
+        let scale = e * self.norm2;
+        for j in j0..=j1 {
+            let d = j as f32 + 0.5 - c.1;
+            let gy = scale * exp_neg(-d * d * a);
+            let row = &mut self.energy[j * self.width + i0..=j * self.width + i1];
+            for (px, &g) in row.iter_mut().zip(&gx) {
+                *px += gy * g;
+            }
+        }
+        self.scratch = gx;
+    }
+
+    /// A step from `a` to `b` depositing energy `e`: the spot integrated
+    /// along the segment.
+    fn segment(&mut self, a: (f32, f32), b: (f32, f32), e: f32) {
+        let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+        let len = (dx * dx + dy * dy).sqrt();
+        if len < 1e-3 * self.cfg.spot_sigma {
+            self.spot(((a.0 + b.0) * 0.5, (a.1 + b.1) * 0.5), e);
+            return;
+        }
+        let (ux, uy) = (dx / len, dy / len);
+        let r = self.reach;
+        let Some((j0, j1)) = Self::pixel_range(a.1.min(b.1) - r, a.1.max(b.1) + r, self.height) else {
+            return;
+        };
+        let (a2, k) = (self.inv_2s2, self.inv_sqrt2_s);
+        let scale = e * self.norm1 / (2.0 * len);
+        let (xlo, xhi) = (a.0.min(b.0) - r, a.0.max(b.0) + r);
+        let (inv_ux, inv_uy) = (1.0 / ux, 1.0 / uy);
+        for j in j0..=j1 {
+            let ry = j as f32 + 0.5 - a.1;
+            // Along the row, x = a.0 + t: the along coordinate is
+            // u = t ux + ry uy, the signed distance d = -t uy + ry ux. Keep
+            // the pixels of the rectangle -r <= u <= len + r, |d| <= r.
+            let mut span = (xlo - a.0, xhi - a.0);
+            clip(&mut span, ux, inv_ux, ry * uy, -r, len + r);
+            clip(&mut span, -uy, -inv_uy, ry * ux, -r, r);
+            let Some((i0, i1)) = Self::pixel_range(span.0 + a.0, span.1 + a.0, self.width) else {
+                continue;
+            };
+            let t0 = i0 as f32 + 0.5 - a.0;
+            let (u0, d0) = (t0 * ux + ry * uy, -t0 * uy + ry * ux);
+            let row = &mut self.energy[j * self.width + i0..=j * self.width + i1];
+            for (n, px) in (0i32..).zip(row.iter_mut()) {
+                let m = n as f32;
+                let (u, d) = (u0 + m * ux, d0 - m * uy);
+                *px += scale * exp_neg(-d * d * a2) * (erf(u * k) - erf((u - len) * k));
+            }
+        }
+    }
+}
+
+/// The largest integer `<= x` (saturating; NaN gives 0).
+fn floor_i64(x: f32) -> i64 {
+    let i = x as i64;
+    if (i as f32) > x { i - 1 } else { i }
+}
+
+/// The smallest integer `>= x` (saturating; NaN gives 0).
+fn ceil_i64(x: f32) -> i64 {
+    let i = x as i64;
+    if (i as f32) < x { i + 1 } else { i }
+}
+
+/// Narrow `span` (values of `t`) to where `lo <= coef * t + c <= hi`;
+/// `inv` is `1 / coef`.
+fn clip(span: &mut (f32, f32), coef: f32, inv: f32, c: f32, lo: f32, hi: f32) {
+    if coef.abs() < 1e-6 {
+        if c < lo || c > hi {
+            *span = (1.0, 0.0);
+        }
+        return;
+    }
+    let (p, q) = ((lo - c) * inv, (hi - c) * inv);
+    span.0 = span.0.max(p.min(q));
+    span.1 = span.1.min(p.max(q));
+}
+
+/// `exp(x)` for `x <= 0` (clamped into `-80 ..= 0`; -80 gives about
+/// 1.8e-35), in plain `f32` arithmetic and bit operations so that loops
+/// over it vectorise: `x = n ln 2 + f` with `n` the nearest integer to
+/// `x / ln 2` (by the 1.5 * 2^23 rounding trick) and `f` in about
+/// `-0.35 ..= 0.35` (Cody and Waite's two-part `ln 2`, so `f` is nearly
+/// exact), `e^f` by its degree-7 Taylor polynomial (truncation error below
+/// 5e-9), and `n` added to the exponent bits. Relative error below 3e-7
+/// (a unit test checks it), from `f32` rounding.
+#[inline(always)]
+fn exp_neg(x: f32) -> f32 {
+    const MAGIC: f32 = 12_582_912.0; // 1.5 * 2^23
+    const LN2_HI: f32 = 0.693_145_75; // 0x3f317200: 16 significant bits, so n * LN2_HI is exact
+    const LN2_LO: f32 = 1.428_606_8e-6;
+    let x = x.clamp(-80.0, 0.0);
+    let r = x * std::f32::consts::LOG2_E + MAGIC;
+    let n = r - MAGIC;
+    let i = (r.to_bits() as i32).wrapping_sub(MAGIC.to_bits() as i32);
+    let f = (x - n * LN2_HI) - n * LN2_LO;
+    let p = 1.0
+        + f * (1.0
+            + f * (1.0 / 2.0
+                + f * (1.0 / 6.0
+                    + f * (1.0 / 24.0 + f * (1.0 / 120.0 + f * (1.0 / 720.0 + f * (1.0 / 5040.0)))))));
+    f32::from_bits((p.to_bits() as i32).wrapping_add(i.wrapping_shl(23)) as u32)
+}
+
+/// The error function, Abramowitz and Stegun 7.1.26:
+/// `erf x = 1 - (a1 t + a2 t² + a3 t³ + a4 t⁴ + a5 t⁵) exp(-x²)`,
+/// `t = 1 / (1 + p x)` for `x >= 0`, odd. The formula's absolute error is
+/// below 1.5e-7; in `f32` with [`exp_neg`], below 5e-7 (a unit test checks
+/// it against a series). Branch-free, so loops over it vectorise.
+#[inline(always)]
+fn erf(x: f32) -> f32 {
+    const P: f32 = 0.327_591_1;
+    const A: [f32; 5] = [0.254_829_6, -0.284_496_74, 1.421_413_8, -1.453_152, 1.061_405_4];
+    let a = x.abs().min(10.0);
+    let t = 1.0 / (1.0 + P * a);
+    let poly = t * (A[0] + t * (A[1] + t * (A[2] + t * (A[3] + t * A[4]))));
+    (1.0 - poly * exp_neg(-a * a)).copysign(x)
+}
+
+/// A separable Gaussian blur of standard deviation `sigma` pixels (kernel
+/// cut at 3 σ and normalised, zero outside the image).
+fn blur(src: &[f32], width: usize, height: usize, sigma: f32) -> Vec<f32> {
+    let half = (3.0 * sigma).ceil() as usize;
+    let mut kernel: Vec<f32> = (0..=2 * half)
+        .map(|i| {
+            let d = i as f32 - half as f32;
+            (-d * d / (2.0 * sigma * sigma)).exp()
+        })
+        .collect();
+    let sum: f32 = kernel.iter().sum();
+    kernel.iter_mut().for_each(|k| *k /= sum);
+    // Horizontal: out[x] += k[t] * src[x + t - half].
+    let mut tmp = vec![0.0f32; src.len()];
+    for (out, row) in tmp.chunks_exact_mut(width).zip(src.chunks_exact(width)) {
+        for (t, &k) in kernel.iter().enumerate() {
+            // Source x = out x + t - half.
+            let (o0, s0) = if t < half { (half - t, 0) } else { (0, t - half) };
+            if o0 >= width || s0 >= width {
+                continue;
+            }
+            let n = (width - o0).min(width - s0);
+            for (o, &s) in out[o0..o0 + n].iter_mut().zip(&row[s0..s0 + n]) {
+                *o += k * s;
+            }
+        }
+    }
+    // Vertical: out row y += k[t] * tmp row (y + t - half).
+    let mut out = vec![0.0f32; src.len()];
+    for (y, orow) in out.chunks_exact_mut(width).enumerate() {
+        for (t, &k) in kernel.iter().enumerate() {
+            let Some(sy) = (y + t).checked_sub(half).filter(|&sy| sy < height) else {
+                continue;
+            };
+            for (o, &s) in orow.iter_mut().zip(&tmp[sy * width..(sy + 1) * width]) {
+                *o += k * s;
+            }
+        }
+    }
+    out
+}
+
+impl Dac for Phosphor {
+    type Error = Infallible;
+
+    /// [`Phosphor::deposit`].
+    fn write<I>(&mut self, samples: I) -> Result<(), Infallible>
+    where
+        I: IntoIterator<Item = Sample>,
+    {
+        self.deposit(samples);
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MAX: u16 = 4095;
+
+    fn on(x: u16, y: u16) -> Sample {
+        Sample::new(x, y, Beam::On)
+    }
+
+    fn off(x: u16, y: u16) -> Sample {
+        Sample::new(x, y, Beam::Off)
+    }
+
+    fn small() -> PhosphorConfig {
+        PhosphorConfig { glow: Glow { strength: 0.0, radius: 1.0 }, ..PhosphorConfig::with_size(64, 64) }
+    }
+
+    fn screen(cfg: PhosphorConfig) -> Phosphor {
+        Phosphor::new(cfg).unwrap()
+    }
+
+    /// A horizontal line at code `y` from code `x0` to `x1` in `n` equal
+    /// steps (`n + 1` samples, the first a spot).
+    fn hline(y: u16, x0: u16, x1: u16, n: u16) -> Vec<Sample> {
+        (0..=n).map(|k| on(x0 + ((u32::from(x1 - x0) * u32::from(k)) / u32::from(n)) as u16, y)).collect()
+    }
+
+    /// The energy summed over pixel rows `rows`, columns `cols`.
+    fn sum(p: &Phosphor, rows: std::ops::Range<usize>, cols: std::ops::Range<usize>) -> f64 {
+        rows.flat_map(|j| cols.clone().map(move |i| (j, i)))
+            .map(|(j, i)| f64::from(p.energy()[j * p.width() + i]))
+            .sum()
+    }
+
+    /// erf by its Maclaurin series (f64, converges for all x; accurate to
+    /// ~1e-9 up to |x| = 4, where it is within 1.6e-8 of 1), and ±1 beyond.
+    fn erf_ref(x: f64) -> f64 {
+        if x.abs() > 4.0 {
+            return x.signum();
+        }
+        let (mut term, mut total, mut n) = (x, x, 0.0);
+        while term.abs() > 1e-17 {
+            n += 1.0;
+            term *= -x * x / n;
+            total += term / (2.0 * n + 1.0);
+        }
+        total * 2.0 / std::f64::consts::PI.sqrt()
+    }
+
+    #[test]
+    fn exp_and_erf_are_within_their_documented_errors() {
+        let mut worst = 0.0f64;
+        for i in 0..=200_000 {
+            let x = -(i as f32) * 4e-4; // 0 down to -80
+            let want = f64::from(x).exp();
+            worst = worst.max((f64::from(exp_neg(x)) - want).abs() / want);
+        }
+        assert!(worst < 3e-7, "max relative exp error {worst:e}");
+        assert_eq!(exp_neg(0.0), 1.0);
+        assert!(exp_neg(-1000.0) > 0.0 && exp_neg(-1000.0) < 1e-34);
+        assert_eq!(exp_neg(5.0), 1.0);
+
+        let mut worst = 0.0f64;
+        for i in -8000..=8000 {
+            let x = i as f32 * 1e-3;
+            worst = worst.max((f64::from(erf(x)) - erf_ref(f64::from(x))).abs());
+        }
+        assert!(worst < 5e-7, "max |erf error| {worst:e}");
+        assert_eq!(erf(0.0), 0.0);
+        assert_eq!(erf(100.0), 1.0);
+        assert_eq!(erf(-100.0), -1.0);
+        assert_eq!(erf(f32::INFINITY), 1.0);
+        assert_eq!(erf(f32::NEG_INFINITY), -1.0);
+    }
+
+    #[test]
+    fn energy_is_conserved() {
+        // Spot well inside: 1 px on 64 px is 64 codes; keep 4σ = 3 px clear.
+        let mut p = screen(small());
+        let samples = [on(2048, 2048), on(2048, 2048), on(2048, 2048)];
+        p.deposit(samples);
+        assert!((p.total_energy() - 3.0).abs() < 0.01 * 3.0, "{}", p.total_energy());
+
+        // Lines in every direction, far from the border, at several speeds.
+        for (angle, step) in [
+            (0.0f32, 16.0f32),
+            (0.3, 16.0),
+            (0.785, 40.0),
+            (1.2, 5.0),
+            (2.0, 100.0),
+            (std::f32::consts::FRAC_PI_2, 64.0),
+        ] {
+            let mut p = screen(small());
+            let (c, s) = (angle.cos(), angle.sin());
+            let n = (1500.0 / step) as usize;
+            let samples: Vec<_> = (0..=n)
+                .map(|k| {
+                    let t = k as f32 * step - 750.0;
+                    on((2048.0 + t * c).round() as u16, (2048.0 + t * s).round() as u16)
+                })
+                .collect();
+            p.deposit(samples.iter().copied());
+            let expected = samples.len() as f64;
+            let got = p.total_energy();
+            assert!(
+                (got - expected).abs() < 0.01 * expected,
+                "angle {angle} step {step}: {got} vs {expected}"
+            );
+        }
+    }
+
+    #[test]
+    fn energy_per_sample_scales_everything() {
+        let mut a = screen(small());
+        let mut b = screen(PhosphorConfig { energy_per_sample: 2.5, ..small() });
+        let line = hline(2048, 1000, 3000, 50);
+        a.deposit(line.iter().copied());
+        b.deposit(line);
+        assert!((b.total_energy() - 2.5 * a.total_energy()).abs() < 1e-3 * b.total_energy());
+    }
+
+    #[test]
+    fn a_slow_line_is_brighter_than_a_fast_one() {
+        // The same line, drawn in 64 and in 128 steps: twice the samples,
+        // twice the energy per unit of length, everywhere along it.
+        let mut fast = screen(small());
+        let mut slow = screen(small());
+        fast.deposit(hline(2048, 512, 3584, 64));
+        slow.deposit(hline(2048, 512, 3584, 128));
+        // The middle of the line: rows around y = 32, columns 16 to 48.
+        let (f, s) = (sum(&fast, 28..36, 16..48), sum(&slow, 28..36, 16..48));
+        assert!((s / f - 2.0).abs() < 0.02, "slow {s} fast {f}");
+        // And the peak pixel on the line.
+        let row = 31; // code 2048 is at y = 64 - 32.0078 = 31.99: rows 31 and 32 share it.
+        let (pf, ps) = (fast.energy()[row * 64 + 32], slow.energy()[row * 64 + 32]);
+        assert!((ps / pf - 2.0).abs() < 0.02, "slow {ps} fast {pf}");
+        // A uniform line: along it (away from its ends) the energy is flat.
+        let profile: Vec<f32> = (16..48).map(|i| slow.energy()[row * 64 + i]).collect();
+        let (lo, hi) = profile.iter().fold((f32::MAX, 0.0f32), |(l, h), &v| (l.min(v), h.max(v)));
+        assert!(hi / lo < 1.01, "{profile:?}");
+    }
+
+    #[test]
+    fn blanked_moves_are_invisible_by_default_and_faint_if_asked() {
+        let jump = [on(500, 500), off(3500, 3500), off(3500, 3500), off(500, 3500)];
+        let mut p = screen(small());
+        p.deposit(jump);
+        // Only the first (lit) spot: one sample's energy.
+        assert!((p.total_energy() - 1.0).abs() < 0.01);
+        let mid = sum(&p, 20..44, 20..44);
+        assert_eq!(mid, 0.0);
+
+        let mut faint = screen(PhosphorConfig { show_blanked: 0.05, ..small() });
+        faint.deposit(jump);
+        // 1 lit spot + 3 blanked steps at 5%.
+        assert!((faint.total_energy() - 1.15).abs() < 0.01, "{}", faint.total_energy());
+        // The diagonal jump crosses the middle, faintly.
+        let mid = sum(&faint, 28..36, 28..36);
+        assert!(mid > 0.0 && mid < 0.05, "{mid}");
+    }
+
+    #[test]
+    fn y_is_up() {
+        let mut p = screen(small());
+        p.deposit([on(0, MAX)]);
+        let e = p.energy();
+        let argmax = (0..e.len()).max_by(|&a, &b| e[a].total_cmp(&e[b])).unwrap();
+        assert_eq!(argmax, 0, "the top-left pixel");
+        // And code (0, 0) is bottom-left, (max, 0) bottom-right.
+        for (s, want) in [(on(0, 0), 63 * 64), (on(MAX, 0), 63 * 64 + 63), (on(MAX, MAX), 63)] {
+            p.clear();
+            p.deposit([s]);
+            let e = p.energy();
+            let argmax = (0..e.len()).max_by(|&a, &b| e[a].total_cmp(&e[b])).unwrap();
+            assert_eq!(argmax, want, "{s:?}");
+        }
+        // In the picture, too: the top-left pixel is green.
+        p.clear();
+        p.deposit([on(0, MAX); 5]);
+        let rgb = p.to_rgb8();
+        assert!(rgb[1] > 100 && rgb[1] >= rgb[0] && rgb[1] >= rgb[2], "{:?}", &rgb[..3]);
+        let last = rgb.len() - 3;
+        assert_eq!(&rgb[last..], &[0, 0, 0]);
+    }
+
+    #[test]
+    fn persistence_decays() {
+        let mut p = screen(PhosphorConfig { persistence: 0.25, ..small() });
+        p.deposit(hline(2048, 1000, 3000, 20));
+        let before = p.total_energy();
+        let px = p.energy()[31 * 64 + 32];
+        p.decay();
+        assert!((p.total_energy() - 0.25 * before).abs() < 1e-6 * before);
+        assert_eq!(p.energy()[31 * 64 + 32], px * 0.25);
+        // Steady state of a refresh loop: frame / (1 - persistence).
+        for _ in 0..40 {
+            p.deposit(hline(2048, 1000, 3000, 20));
+            p.decay();
+        }
+        let steady = p.total_energy() / 0.25;
+        assert!((steady - before / 0.75).abs() < 1e-3 * before, "{steady} vs {}", before / 0.75);
+        p.clear();
+        assert_eq!(p.total_energy(), 0.0);
+        assert_eq!(p.beam(), None);
+    }
+
+    #[test]
+    fn dwell_makes_a_brighter_spot() {
+        let mut once = screen(small());
+        let mut dwell = screen(small());
+        once.deposit([on(2048, 2048)]);
+        dwell.deposit([on(2048, 2048); 5]);
+        let centre = 31 * 64 + 32;
+        let ratio = dwell.energy()[centre] / once.energy()[centre];
+        assert!((ratio - 5.0).abs() < 1e-3, "{ratio}");
+        // A dwell in chunks is the same as in one go.
+        let mut chunks = screen(small());
+        for _ in 0..5 {
+            chunks.deposit([on(2048, 2048)]);
+        }
+        assert!((chunks.energy()[centre] - dwell.energy()[centre]).abs() < 1e-5);
+        // A dwell at the end of a line: the end is brighter by exactly the
+        // dwell's spot.
+        let mut plain = screen(small());
+        let mut dwelled = screen(small());
+        plain.deposit(hline(2048, 1024, 3072, 32));
+        let mut s = hline(2048, 1024, 3072, 32);
+        s.extend([on(3072, 2048); 3]);
+        dwelled.deposit(s);
+        let end = 31 * 64 + 48;
+        let (a, b) = (plain.energy()[end], dwelled.energy()[end]);
+        assert!(b > 1.5 * a, "plain {a} dwelled {b}");
+        assert!((b - a - 3.0 * once.energy()[end - 16]).abs() < 1e-4, "{a} {b}");
+    }
+
+    #[test]
+    fn streaming_in_chunks_equals_one_call() {
+        let line: Vec<_> = (0..200u16)
+            .map(|k| if k % 50 == 49 { off(k * 20, 4000 - k * 20) } else { on(k * 20, k * 15) })
+            .collect();
+        let mut one = screen(PhosphorConfig { show_blanked: 0.1, ..small() });
+        one.deposit(line.iter().copied());
+        let mut many = screen(PhosphorConfig { show_blanked: 0.1, ..small() });
+        for chunk in line.chunks(7) {
+            many.deposit(chunk.iter().copied());
+        }
+        for (a, b) in one.energy().iter().zip(many.energy()) {
+            assert!((a - b).abs() <= 1e-5 * a.abs().max(1e-3), "{a} vs {b}");
+        }
+        assert_eq!(many.beam(), line.last().copied());
+    }
+
+    #[test]
+    fn png_round_trips() {
+        let mut p = screen(PhosphorConfig::with_size(48, 32));
+        p.deposit(hline(1024, 0, MAX, 200));
+        p.deposit([on(2048, 3000); 200]);
+        let bytes = p.encode_png();
+        let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
+        let mut reader = decoder.read_info().unwrap();
+        let mut buf = vec![0; reader.output_buffer_size()];
+        let info = reader.next_frame(&mut buf).unwrap();
+        assert_eq!((info.width, info.height), (48, 32));
+        assert_eq!((info.color_type, info.bit_depth), (png::ColorType::Rgb, png::BitDepth::Eight));
+        let rgb = p.to_rgb8();
+        assert_eq!(&buf[..info.buffer_size()], &rgb[..]);
+        // A few pixels: black corner, green line, saturated spot.
+        let px = |x: usize, y: usize| &buf[(y * 48 + x) * 3..(y * 48 + x) * 3 + 3];
+        assert_eq!(px(0, 0), &[0, 0, 0]);
+        let line = px(24, 24); // code 1024 of 4096 on 32 rows: y = 32 - 8.0 = 24.
+        assert!(line[1] > 80 && line[1] > line[0] && line[1] > line[2], "{line:?}");
+        let spot = px(24, 8); // code 3000: y = 32 - 23.4 = 8.6.
+        assert!(spot.iter().all(|&c| c > 200), "{spot:?}");
+        // And a file.
+        let path = std::env::temp_dir().join(format!("isoscope-phosphor-{}.png", std::process::id()));
+        p.write_png(&path).unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), p.encode_png());
+        std::fs::remove_file(&path).unwrap();
+        let err = p.write_png("/nonexistent-dir/x.png").unwrap_err();
+        assert!(matches!(err, PhosphorError::Io(_)), "{err}");
+    }
+
+    #[test]
+    fn bad_configs_are_refused() {
+        use PhosphorError as E;
+        let base = small();
+        macro_rules! refused {
+            ($($field:ident: $value:expr),+ => $want:pat) => {{
+                let cfg = PhosphorConfig { $($field: $value,)+ ..base.clone() };
+                let err = Phosphor::new(cfg).unwrap_err();
+                assert!(matches!(err, $want), "{}: {err:?}", stringify!($($field = $value),+));
+                assert!(!err.to_string().is_empty());
+            }};
+        }
+        let glow = |strength, radius| Glow { strength, radius };
+        let palette = |stops: &[(f32, [f32; 3])]| Palette { stops: stops.to_vec() };
+        refused!(width: 0 => E::ZeroSize { width: 0, height: 64 });
+        refused!(height: 0 => E::ZeroSize { width: 64, height: 0 });
+        refused!(width: 8193 => E::TooLarge { width: 8193, .. });
+        refused!(height: u32::MAX => E::TooLarge { .. });
+        refused!(bits: 0 => E::BadBits(0));
+        refused!(bits: 17 => E::BadBits(17));
+        for sigma in [0.0, -1.0, f32::NAN, f32::INFINITY, MAX_SIGMA * 1.01] {
+            refused!(spot_sigma: sigma => E::BadSigma(_));
+        }
+        for energy in [-1.0, f32::NAN, f32::INFINITY] {
+            refused!(energy_per_sample: energy => E::BadEnergy(_));
+        }
+        for exposure in [0.0, -1.0, f32::NAN, f32::INFINITY] {
+            refused!(exposure: exposure => E::BadExposure(_));
+        }
+        for gamma in [0.0, -2.2, f32::NAN, f32::INFINITY] {
+            refused!(gamma: gamma => E::BadGamma(_));
+        }
+        for g in [
+            glow(-0.1, 5.0),
+            glow(0.1, 0.0),
+            glow(0.1, -1.0),
+            glow(0.1, 1e6),
+            glow(f32::NAN, 1.0),
+            glow(0.1, f32::NAN),
+        ] {
+            refused!(glow: g => E::BadGlow { .. });
+        }
+        for persistence in [-0.1, 1.5, f32::NAN] {
+            refused!(persistence: persistence => E::BadPersistence(_));
+        }
+        for blanked in [-0.1, 1.5, f32::NAN] {
+            refused!(show_blanked: blanked => E::BadShowBlanked(_));
+        }
+        refused!(palette: palette(&[]) => E::BadPalette(_));
+        refused!(palette: palette(&[(0.5, [0.0; 3]), (0.2, [1.0; 3])]) => E::BadPalette(_));
+        refused!(palette: palette(&[(0.0, [2.0; 3])]) => E::BadPalette(_));
+        refused!(palette: palette(&[(f32::NAN, [0.0; 3])]) => E::BadPalette(_));
+        refused!(palette: palette(&[(0.0, [f32::NAN; 3])]) => E::BadPalette(_));
+        // Zero glow strength needs no radius; the edges of each range are fine.
+        for ok in [
+            PhosphorConfig { glow: glow(0.0, 0.0), ..base.clone() },
+            PhosphorConfig { width: MAX_SIZE, height: 1, ..base.clone() },
+            PhosphorConfig { bits: 1, persistence: 0.0, show_blanked: 1.0, ..base.clone() },
+            PhosphorConfig { bits: 16, persistence: 1.0, energy_per_sample: 0.0, ..base.clone() },
+        ] {
+            Phosphor::new(ok).unwrap();
+        }
+        assert_eq!(
+            PhosphorError::TooLarge { width: 9000, height: 1 }.to_string(),
+            "image size 9000x1 is larger than 8192x8192"
+        );
+    }
+
+    #[test]
+    fn extreme_inputs_do_not_panic() {
+        let mut p = screen(PhosphorConfig { show_blanked: 0.5, ..small() });
+        // Corners and edges, lit and blanked, and codes beyond 12 bits.
+        let extremes = [0, 1, MAX - 1, MAX, 4096, u16::MAX];
+        for &x in &extremes {
+            for &y in &extremes {
+                p.deposit([on(x, y), off(y, x), on(u16::MAX - x, y)]);
+            }
+        }
+        // A million samples at one point (one spot of that energy).
+        p.deposit(std::iter::repeat_n(on(MAX, 0), 1_000_000));
+        p.deposit(std::iter::repeat_n(off(0, 0), 1_000_000));
+        assert!(p.energy().iter().all(|e| e.is_finite() && *e >= 0.0));
+        let rgb = p.to_rgb8();
+        assert_eq!(rgb.len(), 64 * 64 * 3);
+        // The saturated corner is white-ish, not wrapped around.
+        let corner = &rgb[(63 * 64 + 63) * 3..];
+        assert!(corner.iter().all(|&c| c > 200), "{corner:?}");
+        // Edge cases of the configuration: a 1x1 image, a huge spot, tiny
+        // and huge exposure, 1-bit and 16-bit DACs.
+        for cfg in [
+            PhosphorConfig { width: 1, height: 1, ..small() },
+            PhosphorConfig { spot_sigma: MAX_SIGMA, ..small() },
+            PhosphorConfig { spot_sigma: 1e-6, ..small() },
+            PhosphorConfig { exposure: 1e-30, gamma: 0.01, ..small() },
+            PhosphorConfig { exposure: 1e30, gamma: 100.0, ..small() },
+            PhosphorConfig { bits: 1, ..small() },
+            PhosphorConfig { bits: 16, width: 3, height: 1000, ..small() },
+            PhosphorConfig { glow: Glow { strength: 1.0, radius: MAX_SIGMA }, ..small() },
+        ] {
+            let mut p = screen(cfg);
+            p.deposit([on(0, 0), on(MAX, MAX), on(0, MAX), on(u16::MAX, u16::MAX), on(0, 0), on(0, 0)]);
+            assert!(p.energy().iter().all(|e| e.is_finite() && *e >= 0.0));
+            assert_eq!(p.to_rgb8().len(), p.width() * p.height() * 3);
+            p.encode_png();
+        }
+    }
+
+    #[test]
+    fn is_a_dac() {
+        let mut p = screen(small());
+        let mut reference = screen(small());
+        let samples = hline(3000, 100, 4000, 30);
+        fn play<D: Dac<Error = Infallible>>(mut dac: D, s: &[Sample]) {
+            dac.write(s.iter().copied()).unwrap();
+        }
+        // Through the `&mut D` impl.
+        play(&mut p, &samples);
+        reference.deposit(samples.iter().copied());
+        assert_eq!(p.energy(), reference.energy());
+        // Straight from the beam scheduler.
+        use isoscope_core::beam::{BeamConfig, Scheduler};
+        use isoscope_core::command::Command;
+        use isoscope_core::screen::ScreenPoint;
+        p.clear();
+        let cmds = [
+            Command::MoveTo(ScreenPoint::new(500.0, 500.0)),
+            Command::LineTo(ScreenPoint::new(3500.0, 500.0)),
+        ];
+        let cfg = BeamConfig::default();
+        let mut sched = Scheduler::new(cmds, &cfg);
+        p.write(&mut sched).unwrap();
+        let lit = sched.stats().lit_samples as f64;
+        assert!((p.total_energy() - lit).abs() < 0.01 * lit, "{} vs {lit}", p.total_energy());
+    }
+
+    #[test]
+    fn palette_interpolates() {
+        let p = Palette::p31();
+        assert_eq!(p.color(0.0), [0.0; 3]);
+        assert_eq!(p.color(1.0), [0.9, 1.0, 0.9]);
+        assert_eq!(p.color(0.5), [0.1, 0.6, 0.2]);
+        let q = p.color(0.25);
+        assert!((q[1] - 0.3).abs() < 1e-6);
+        assert_eq!(p.color(f32::NAN), [0.0; 3]);
+        assert_eq!(p.color(7.0), p.color(1.0));
+        assert_eq!(Palette::gray().color(0.5), [0.5; 3]);
+        // The default picture's colours are green everywhere below white.
+        for i in 0..=100 {
+            let c = p.color(i as f32 / 100.0);
+            assert!(c[1] >= c[0] && c[1] >= c[2]);
+        }
+    }
+}
