@@ -374,7 +374,7 @@ fn build_scene(args: &StatsArgs) -> Result<Scene> {
         },
         margin: v.margin,
         bits: v.bits,
-        spacing: [1.0, 1.0, 1.0],
+        spacing: vol.spacing,
     };
     let cfg = SceneConfig {
         planes,

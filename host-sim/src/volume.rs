@@ -127,7 +127,13 @@ pub struct LoadedVolume {
     pub dims: Dims,
     /// Samples, x fastest.
     pub samples: Samples,
+    /// Physical size of a voxel along x, y, z (any unit; `[1, 1, 1]` when
+    /// the format does not say), honoured by the 3D view.
+    pub spacing: [f32; 3],
 }
+
+/// Voxel spacing when a format gives none.
+pub const UNIT_SPACING: [f32; 3] = [1.0, 1.0, 1.0];
 
 impl LoadedVolume {
     /// Compute a built-in demo.
@@ -135,7 +141,7 @@ impl LoadedVolume {
         let n = spec.n;
         let mut data = vec![0f32; n * n * n];
         spec.demo.fill(n, &mut data)?;
-        Ok(Self { dims: Dims(n, n, n), samples: Samples::F32(data) })
+        Ok(Self { dims: Dims(n, n, n), samples: Samples::F32(data), spacing: UNIT_SPACING })
     }
 
     /// Decode raw little-endian samples.
@@ -170,7 +176,7 @@ impl LoadedVolume {
                 bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect(),
             ),
         };
-        Ok(Self { dims, samples })
+        Ok(Self { dims, samples, spacing: UNIT_SPACING })
     }
 
     /// Decode a VolPack density file (`.den`): a 62-byte header (version 1,
@@ -207,7 +213,7 @@ impl LoadedVolume {
         if body.len() < need {
             bail!("the .den file is truncated: {} of {need} sample bytes after the header", body.len());
         }
-        Ok(Self { dims, samples: Samples::U8(body[..need].to_vec()) })
+        Ok(Self { dims, samples: Samples::U8(body[..need].to_vec()), spacing: UNIT_SPACING })
     }
 
     /// Read a volume file whose format its name tells (`.den`).

@@ -2,7 +2,7 @@
 //! length errors, and the `--dims`/`--dtype`/`--demo` parsers.
 
 use isoscope_core::demo::Demo;
-use isoscope_sim::volume::{DemoSpec, Dims, Dtype, LoadedVolume, MAX_DEMO_N, Samples};
+use isoscope_sim::volume::{DemoSpec, Dims, Dtype, LoadedVolume, MAX_DEMO_N, Samples, UNIT_SPACING};
 
 const DIMS: Dims = Dims(3, 2, 1);
 
@@ -10,7 +10,7 @@ const DIMS: Dims = Dims(3, 2, 1);
 fn u8_round_trip() {
     let v = [0u8, 1, 127, 128, 254, 255];
     let l = LoadedVolume::from_bytes(&v, DIMS, Dtype::U8).unwrap();
-    assert_eq!(l, LoadedVolume { dims: DIMS, samples: Samples::U8(v.to_vec()) });
+    assert_eq!(l, LoadedVolume { dims: DIMS, samples: Samples::U8(v.to_vec()), spacing: UNIT_SPACING });
 }
 
 #[test]
@@ -19,7 +19,7 @@ fn u16_round_trip() {
     let bytes: Vec<u8> = v.iter().flat_map(|x| x.to_le_bytes()).collect();
     assert_eq!(&bytes[8..10], [0x34, 0x12], "little-endian");
     let l = LoadedVolume::from_bytes(&bytes, DIMS, Dtype::U16).unwrap();
-    assert_eq!(l, LoadedVolume { dims: DIMS, samples: Samples::U16(v.to_vec()) });
+    assert_eq!(l, LoadedVolume { dims: DIMS, samples: Samples::U16(v.to_vec()), spacing: UNIT_SPACING });
 }
 
 #[test]
@@ -27,7 +27,7 @@ fn i16_round_trip() {
     let v = [i16::MIN, -1000, -1, 0, 1, i16::MAX];
     let bytes: Vec<u8> = v.iter().flat_map(|x| x.to_le_bytes()).collect();
     let l = LoadedVolume::from_bytes(&bytes, DIMS, Dtype::I16).unwrap();
-    assert_eq!(l, LoadedVolume { dims: DIMS, samples: Samples::I16(v.to_vec()) });
+    assert_eq!(l, LoadedVolume { dims: DIMS, samples: Samples::I16(v.to_vec()), spacing: UNIT_SPACING });
 }
 
 #[test]
