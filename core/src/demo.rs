@@ -6,6 +6,10 @@
 //!   maximum (at r = 6 on the diagonals of the x-y plane) is 1.
 //! - [`Demo::Gyroid`]: sin x cos y + sin y cos z + sin z cos x sampled at
 //!   t_i = 8 pi i / (N - 1) on each axis (four periods).
+//! - [`Demo::Sphere`]: the distance from the centre, the cube spanning
+//!   [-1, 1]^3; level 0.8 is a sphere of radius 0.8.
+//! - [`Demo::Torus`]: the distance from a ring of radius 0.6 in the x-y
+//!   plane; level 0.25 is a torus of tube radius 0.25.
 
 use crate::grid::GridError;
 
@@ -17,6 +21,10 @@ pub enum Demo {
     Hydrogen,
     /// Gyroid minimal surface, four periods per axis.
     Gyroid,
+    /// Distance from the centre: spheres.
+    Sphere,
+    /// Distance from a ring: tori.
+    Torus,
 }
 
 /// Half the side of the hydrogen demo's cube, in Bohr radii.
@@ -27,13 +35,15 @@ pub const HYDROGEN_PEAK: f32 = 5.934_267;
 
 impl Demo {
     /// Both demos.
-    pub const ALL: [Demo; 2] = [Demo::Hydrogen, Demo::Gyroid];
+    pub const ALL: [Demo; 4] = [Demo::Hydrogen, Demo::Gyroid, Demo::Sphere, Demo::Torus];
 
     /// The demo's name on the command line.
     pub const fn name(self) -> &'static str {
         match self {
             Demo::Hydrogen => "hydrogen",
             Demo::Gyroid => "gyroid",
+            Demo::Sphere => "sphere",
+            Demo::Torus => "torus",
         }
     }
 
@@ -43,11 +53,14 @@ impl Demo {
     }
 
     /// A level that shows the demo's characteristic surface: the four lobes
-    /// of the orbital, or the gyroid's zero set.
+    /// of the orbital, the gyroid's zero set, a sphere of radius 0.8, a
+    /// torus of tube radius 0.25.
     pub const fn default_level(self) -> f32 {
         match self {
             Demo::Hydrogen => 0.1,
             Demo::Gyroid => 0.0,
+            Demo::Sphere => 0.8,
+            Demo::Torus => 0.25,
         }
     }
 
@@ -71,6 +84,16 @@ impl Demo {
                 let (sz, cz) = (libm::sinf(z), libm::cosf(z));
                 sx * cy + sy * cz + sz * cx
             }
+            Demo::Sphere | Demo::Torus => {
+                let s = |f: f32| 2.0 * f - 1.0;
+                let (x, y, z) = (s(fi), s(fj), s(fk));
+                if self == Demo::Sphere {
+                    libm::sqrtf(x * x + y * y + z * z)
+                } else {
+                    let ring = libm::sqrtf(x * x + y * y) - 0.6;
+                    libm::sqrtf(ring * ring + z * z)
+                }
+            }
         }
     }
 
@@ -89,7 +112,7 @@ impl Demo {
         }
         match self {
             Demo::Gyroid => fill_gyroid(n, out),
-            Demo::Hydrogen => {
+            Demo::Hydrogen | Demo::Sphere | Demo::Torus => {
                 for (idx, v) in out.iter_mut().enumerate() {
                     let (i, j, k) = (idx % n, idx / n % n, idx / (n * n));
                     *v = self.sample(n, i, j, k);

@@ -3,6 +3,7 @@
 //! - [`volume`]: volume sources (raw files, built-in demos) and sample types.
 //! - [`contour`]: parallel chicken-wire contouring of a volume into records,
 //!   and their CSV export.
+//! - [`info`]: a volume's summary, histogram and suggested levels.
 //! - [`progress`]: progress lines on a terminal for long work.
 //! - [`scene`]: a whole frame: contour, project, display list, cull,
 //!   stitch, order, beam schedule.
@@ -11,6 +12,7 @@
 //!   shows them (Gaussian spot, energy per sample, P31 green), to RGB and PNG.
 
 pub mod contour;
+pub mod info;
 pub mod phosphor;
 pub mod progress;
 pub mod scene;

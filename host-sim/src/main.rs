@@ -35,9 +35,21 @@ enum Cmd {
     /// Build one display frame (contour, project, cull, stitch, order,
     /// schedule the beam) and print its statistics as key=value lines.
     Stats(StatsArgs),
+    /// Describe a volume: dims, type, spacing, value range, a histogram and
+    /// suggested contour levels.
+    Info(InfoArgs),
     /// Render what the oscilloscope shows to a PNG: the frame's samples on a
     /// simulated P31 phosphor (beam spot, brightness from beam speed, glow).
     Render(RenderArgs),
+}
+
+#[derive(Args, Debug)]
+struct InfoArgs {
+    #[command(flatten)]
+    source: Source,
+    /// Histogram bins.
+    #[arg(long, default_value_t = 32)]
+    bins: usize,
 }
 
 #[derive(Args, Debug)]
@@ -429,6 +441,9 @@ fn main() -> ExitCode {
         Cmd::Contour(a) => contour(a),
         Cmd::Stats(a) => stats(a),
         Cmd::Render(a) => render(a),
+        Cmd::Info(a) => {
+            load(&a.source).map(|(v, _)| print!("{}", isoscope_sim::info::summarize(&v, a.bins).report()))
+        }
     };
     match r {
         Ok(()) => ExitCode::SUCCESS,

@@ -638,3 +638,24 @@ fn render_rejects_bad_picture_settings() {
         assert!(!text(&out.stderr).contains("panicked"));
     }
 }
+
+/// `info` describes a volume and suggests levels.
+#[test]
+fn info_describes_a_volume() {
+    let out = run(&["info", "--demo", "sphere:16", "--bins", "8"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let t = text(&out.stdout);
+    for k in [
+        "dims=16x16x16",
+        "dtype=f32",
+        "spacing=1x1x1",
+        "samples=4096",
+        "nonfinite=0",
+        "min=",
+        "max=",
+        "suggested_levels=",
+    ] {
+        assert!(t.contains(k), "{k} not in:\n{t}");
+    }
+    assert_eq!(t.lines().filter(|l| l.starts_with("# ")).count(), 8);
+}
