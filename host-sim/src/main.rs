@@ -149,7 +149,7 @@ struct Source {
     #[arg(long, requires = "input")]
     dtype: Option<Dtype>,
     /// A built-in volume instead of a file: hydrogen:N (the paper's Figure 1,
-    /// 3d_xy orbital) or gyroid:N.
+    /// 3d_xy orbital), gyroid:N, sphere:N or torus:N.
     #[arg(long, value_name = "NAME:N")]
     demo: Option<DemoSpec>,
 }
