@@ -10,7 +10,7 @@ use isoscope_core::command::{Command, Point3};
 use isoscope_core::contour::ContourStats;
 use isoscope_core::grid::{Plane, Volume};
 use isoscope_core::sample::Sample;
-use isoscope_core::surface::{SliceId, SurfaceSink, band_rows, contour_band};
+use isoscope_core::surface::{SliceId, SurfaceSink, band_rows, contour_band, contour_slice};
 use isoscope_core::trace::Traversal;
 use std::convert::Infallible;
 use std::io::Write;
@@ -45,16 +45,18 @@ pub struct Job<'a> {
     pub threads: usize,
     /// Keep the commands (false: only count them).
     pub keep: bool,
+    /// Contour only every `every`-th slice of each plane (1: all).
+    pub every: usize,
 }
 
-/// Keeps a band's commands with their slice.
-struct Keep<'v>(&'v mut Vec<(SliceId, u32, Command<Point3>)>);
+/// A sink that hands every command to a closure.
+struct FnSink<'f>(&'f mut dyn FnMut(SliceId, usize, Command<Point3>));
 
-impl SurfaceSink for Keep<'_> {
+impl SurfaceSink for FnSink<'_> {
     type Error = Infallible;
     #[inline]
     fn command(&mut self, slice: SliceId, level: usize, c: Command<Point3>) -> Result<(), Infallible> {
-        self.0.push((slice, level as u32, c));
+        (self.0)(slice, level, c);
         Ok(())
     }
 }
@@ -83,18 +85,28 @@ impl SurfaceSink for Checksum {
 struct Band {
     plane: Plane,
     rows: std::ops::Range<usize>,
+    /// One slice only (when contouring every n-th slice).
+    slice: Option<usize>,
 }
 
 /// Rows per band: small enough to balance the threads, large enough that
 /// a band is worth a task.
-fn bands<T: Sample>(volume: &Volume<'_, T>, planes: &[Plane], threads: usize) -> Vec<Band> {
+fn bands<T: Sample>(volume: &Volume<'_, T>, planes: &[Plane], threads: usize, every: usize) -> Vec<Band> {
     let mut out = vec![];
+    if every > 1 {
+        for &plane in planes {
+            for index in (0..volume.slice_count(plane)).step_by(every) {
+                out.push(Band { plane, rows: 0..0, slice: Some(index) });
+            }
+        }
+        return out;
+    }
     for &plane in planes {
         let rows = band_rows(volume, plane);
         let per = rows.div_ceil(8 * threads).max(1);
         let mut r = 0;
         while r < rows {
-            out.push(Band { plane, rows: r..(r + per).min(rows) });
+            out.push(Band { plane, rows: r..(r + per).min(rows), slice: None });
             r += per;
         }
     }
@@ -113,7 +125,7 @@ pub fn contour_volume<T: Sample + Sync>(
         return Err(anyhow!("contour level #{} ({}) is not a finite number", i + 1, job.levels[i]));
     }
     let threads = job.threads.max(1);
-    let bands = bands(volume, job.planes, threads);
+    let bands = bands(volume, job.planes, threads, job.every);
     type BandResult = (Vec<(SliceId, u32, Command<Point3>)>, ContourStats);
     let results: Vec<Mutex<Option<BandResult>>> = bands.iter().map(|_| Mutex::new(None)).collect();
     let next = AtomicUsize::new(0);
@@ -124,11 +136,22 @@ pub fn contour_volume<T: Sample + Sync>(
             let Some(band) = bands.get(i) else { return Ok(()) };
             let mut cmds = Vec::new();
             let (levels, traversal) = (job.levels, job.traversal);
+            let run = |sink: &mut dyn FnMut(SliceId, usize, Command<Point3>)| {
+                let mut s = FnSink(sink);
+                match band.slice {
+                    Some(index) => {
+                        contour_slice(volume, SliceId { plane: band.plane, index }, levels, traversal, &mut s)
+                    }
+                    None => contour_band(volume, band.plane, band.rows.clone(), levels, traversal, &mut s),
+                }
+            };
             let stats = if job.keep {
-                contour_band(volume, band.plane, band.rows.clone(), levels, traversal, &mut Keep(&mut cmds))
+                run(&mut |slice, level, c| cmds.push((slice, level as u32, c)))
             } else {
                 let mut sum = Checksum(0);
-                let stats = contour_band(volume, band.plane, band.rows.clone(), levels, traversal, &mut sum);
+                let stats = run(&mut |slice, level, c| {
+                    let _ = sum.command(slice, level, c);
+                });
                 std::hint::black_box(sum.0);
                 stats
             }
@@ -174,8 +197,8 @@ pub fn contour_volume<T: Sample + Sync>(
 
 /// The number of work units [`contour_volume`] splits a job into (for
 /// progress reporting).
-pub fn work_units<T: Sample>(volume: &Volume<'_, T>, planes: &[Plane], threads: usize) -> usize {
-    bands(volume, planes, threads.max(1)).len()
+pub fn work_units<T: Sample>(volume: &Volume<'_, T>, job: &Job<'_>) -> usize {
+    bands(volume, job.planes, job.threads.max(1), job.every.max(1)).len()
 }
 
 /// Write commands as CSV: a header, then one command per line,

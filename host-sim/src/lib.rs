@@ -7,6 +7,7 @@
 //! - [`progress`]: progress lines on a terminal for long work.
 //! - [`scene`]: a whole frame: contour, project, display list, cull,
 //!   stitch, order, beam schedule.
+//! - [`svg`]: the display list as SVG.
 //! - [`virtual_dac`]: the host's DAC, recording samples with their clock.
 //! - [`phosphor`]: the screen: DAC samples rasterised as a CRT in XY mode
 //!   shows them (Gaussian spot, energy per sample, P31 green), to RGB and PNG.
@@ -16,5 +17,6 @@ pub mod info;
 pub mod phosphor;
 pub mod progress;
 pub mod scene;
+pub mod svg;
 pub mod virtual_dac;
 pub mod volume;

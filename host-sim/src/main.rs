@@ -71,7 +71,7 @@ struct RenderArgs {
     frames: u32,
 }
 
-#[derive(Args, Debug)]
+#[derive(Args, Debug, Clone, Copy)]
 struct ViewArgs {
     /// Rotation about the vertical screen axis, degrees.
     #[arg(long, default_value_t = View::DEFAULT.yaw, allow_hyphen_values = true)]
@@ -136,7 +136,7 @@ struct StatsArgs {
     beam: BeamArgs,
 }
 
-#[derive(Args, Debug)]
+#[derive(Args, Debug, Clone)]
 struct Source {
     /// Volume file: a VolPack .den, or raw little-endian samples, x fastest
     /// (a raw file needs --dims and --dtype).
@@ -158,6 +158,9 @@ struct Source {
 enum Format {
     /// One command per line.
     Csv,
+    /// The display list after culling, stitching and ordering, seen through
+    /// the view (view flags apply), as SVG.
+    Svg,
     /// Write nothing (for timing with --stats).
     None,
 }
@@ -196,6 +199,9 @@ struct ContourArgs {
     /// Which traversal of the contouring trees.
     #[arg(long, value_enum, default_value = "corrected")]
     traversal: TraversalArg,
+    /// View settings (for --format svg).
+    #[command(flatten)]
+    view: ViewArgs,
 }
 
 /// A contour level: a finite number within the `f32` range.
@@ -245,7 +251,37 @@ fn planes(axes: &[String]) -> Result<Vec<Plane>> {
     Ok(out)
 }
 
+fn contour_svg(args: &ContourArgs) -> Result<()> {
+    let scene_args = StatsArgs {
+        source: Source {
+            input: args.source.input.clone(),
+            dims: args.source.dims,
+            dtype: args.source.dtype,
+            demo: args.source.demo,
+        },
+        levels: args.levels.clone(),
+        axes: args.axes.clone(),
+        view: ViewArgs { ..args.view },
+        beam: BeamArgs { lit_step: BeamConfig::default().lit_step, rate: 1e6, order: OrderArg::Optimized },
+    };
+    let scene = build_scene(&scene_args)?;
+    let bits = args.view.bits;
+    match &args.output {
+        Some(path) => {
+            let f =
+                std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+            isoscope_sim::svg::write_svg(std::io::BufWriter::new(f), &scene.list, bits)
+                .with_context(|| format!("cannot write {}", path.display()))
+        }
+        None => isoscope_sim::svg::write_svg(std::io::stdout().lock(), &scene.list, bits)
+            .context("cannot write to standard output"),
+    }
+}
+
 fn contour(args: &ContourArgs) -> Result<()> {
+    if let Format::Svg = args.format {
+        return contour_svg(args);
+    }
     let (vol, demo) = load(&args.source)?;
     let levels = if args.levels.is_empty() {
         match demo {
@@ -271,7 +307,11 @@ fn contour(args: &ContourArgs) -> Result<()> {
         traversal,
         threads,
         keep: matches!(args.format, Format::Csv),
+        every: args.view.every,
     };
+    if args.view.every == 0 {
+        bail!("--every must be at least 1");
+    }
     let Dims(nx, ny, nz) = vol.dims;
     fn run<T: Sample + Sync>(
         data: &[T],
@@ -279,7 +319,7 @@ fn contour(args: &ContourArgs) -> Result<()> {
         job: &Job<'_>,
     ) -> Result<isoscope_sim::contour::Contoured> {
         let v = Volume::new(data, d.0, d.1, d.2)?;
-        let progress = Progress::new("contouring", work_units(&v, job.planes, job.threads));
+        let progress = Progress::new("contouring", work_units(&v, job));
         contour_volume(&v, job, Some(&progress))
     }
     let d = (nx, ny, nz);

@@ -659,3 +659,22 @@ fn info_describes_a_volume() {
     }
     assert_eq!(t.lines().filter(|l| l.starts_with("# ")).count(), 8);
 }
+
+/// `--format svg` writes the display list; `--every N` keeps every N-th
+/// slice in the CSV.
+#[test]
+fn contour_svg_and_slice_stride() {
+    let out = run(&["contour", "--demo", "torus:16", "--format", "svg"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let svg = text(&out.stdout);
+    assert!(svg.starts_with("<?xml") && svg.trim_end().ends_with("</svg>"));
+    assert!(svg.contains("<polygon") || svg.contains("<polyline"));
+    let out = run(&["contour", "--demo", "torus:16", "--every", "5"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let slices: std::collections::BTreeSet<usize> =
+        text(&out.stdout).lines().skip(1).map(|l| l.split(',').nth(2).unwrap().parse().unwrap()).collect();
+    assert!(!slices.is_empty());
+    assert!(slices.iter().all(|s| s % 5 == 0), "{slices:?}");
+    let out = run(&["contour", "--demo", "torus:16", "--every", "0"]);
+    assert!(!out.status.success());
+}

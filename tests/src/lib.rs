@@ -18,7 +18,7 @@ pub fn demo_samples(demo: Demo, n: usize) -> Vec<f32> {
 pub fn contour_demo(demo: Demo, n: usize, levels: &[f32], planes: &[Plane], threads: usize) -> Contoured {
     let data = demo_samples(demo, n);
     let volume = Volume::new(&data, n, n, n).expect("demo volume");
-    let job = Job { planes, levels, traversal: Traversal::Corrected, threads, keep: true };
+    let job = Job { planes, levels, traversal: Traversal::Corrected, threads, keep: true, every: 1 };
     contour_volume(&volume, &job, None).expect("contouring a demo")
 }
 
