@@ -20,7 +20,18 @@ use std::process::ExitCode;
 #[command(
     name = "isoscope-sim",
     version,
-    about = "The isoscope contouring core on the host: contour volumes, export, simulate"
+    about = "The isoscope core on the host: contour volumes, build display frames, see what the scope shows",
+    after_help = "Examples:
+  isoscope-sim render --demo hydrogen:32 -o hydrogen.png      the paper's Figure 1, as the scope shows it
+  isoscope-sim info head.den                                  dims, range, histogram, suggested levels
+  isoscope-sim render head.den --level 38 --every 4 --pitch 60 -o head.png
+  isoscope-sim stats --demo gyroid:48                         frame statistics (fps at 1 MS/s, blank travel)
+  isoscope-sim contour --demo torus:32 --format svg -o torus.svg
+  isoscope-sim contour data.raw --dims 256x256x128 --dtype i16 --level 300 -o ct.csv
+
+Volumes: a raw file (--dims NXxNYxNZ --dtype u8|u16|i16|f32, x fastest), a VolPack .den file, or
+--demo hydrogen:N | gyroid:N | sphere:N | torus:N. Levels: --level L (repeatable); a demo has a
+default. 'isoscope-sim COMMAND --help' lists every flag."
 )]
 struct Cli {
     #[command(subcommand)]
