@@ -11,7 +11,12 @@
 //! - [`virtual_dac`]: the host's DAC, recording samples with their clock.
 //! - [`phosphor`]: the screen: DAC samples rasterised as a CRT in XY mode
 //!   shows them (Gaussian spot, energy per sample, P31 green), to RGB and PNG.
+//! - [`animate`]: the surface turning on the simulated screen, as a looping
+//!   GIF or APNG.
+//! - [`wav`]: the sample stream as a WAV file (X, Y and the beam) for a
+//!   DC-coupled sound card driving a real scope.
 
+pub mod animate;
 pub mod contour;
 pub mod info;
 pub mod phosphor;
@@ -20,3 +25,4 @@ pub mod scene;
 pub mod svg;
 pub mod virtual_dac;
 pub mod volume;
+pub mod wav;

@@ -7,11 +7,13 @@ use isoscope_core::grid::{Plane, Volume};
 use isoscope_core::sample::Sample;
 use isoscope_core::trace::Traversal;
 use isoscope_core::view::{Projection, View};
+use isoscope_sim::animate::{AnimConfig, AnimFormat, animate_surface};
 use isoscope_sim::contour::{Job, contour_volume, work_units, write_csv};
 use isoscope_sim::phosphor::PhosphorConfig;
 use isoscope_sim::progress::Progress;
-use isoscope_sim::scene::{self, Order, Scene, SceneConfig};
+use isoscope_sim::scene::{self, Order, Scene, SceneConfig, Surface, refresh_samples};
 use isoscope_sim::volume::{DemoSpec, Dims, Dtype, LoadedVolume, Samples};
+use isoscope_sim::wav::{WavChannels, WavConfig, WavFormat, audio_beam, write_wav_file};
 use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -49,6 +51,10 @@ enum Cmd {
     /// Describe a volume: dims, type, spacing, value range, a histogram and
     /// suggested contour levels.
     Info(InfoArgs),
+    /// Write the beam's sample stream as a WAV file (left = X, right = Y,
+    /// optional third channel = beam): drive a real scope from a DC-coupled
+    /// sound card, no microcontroller needed.
+    Wav(WavArgs),
     /// Render what the oscilloscope shows to a PNG: the frame's samples on a
     /// simulated P31 phosphor (beam spot, brightness from beam speed, glow).
     Render(RenderArgs),
@@ -80,6 +86,53 @@ struct RenderArgs {
     /// Refresh the frame this many times on the phosphor (persistence).
     #[arg(long, default_value_t = 1)]
     frames: u32,
+    /// Also write an animation of the surface slowly turning (yaw) to this
+    /// file: .gif, or .png for an animated PNG. (The still picture is not
+    /// written then.)
+    #[arg(long, value_name = "FILE")]
+    animate: Option<PathBuf>,
+    /// Animation frames.
+    #[arg(long, default_value_t = 72)]
+    anim_frames: u32,
+    /// Degrees the animation turns in all (360: one full turn, looping).
+    #[arg(long, default_value_t = 360.0, allow_hyphen_values = true)]
+    turn: f32,
+}
+
+#[derive(Args, Debug)]
+struct WavArgs {
+    #[command(flatten)]
+    source: Source,
+    /// Contour level (repeatable). Default for a demo: its characteristic level.
+    #[arg(long = "level", value_name = "L", allow_hyphen_values = true, value_parser = parse_level)]
+    levels: Vec<f32>,
+    /// Slicing planes, comma-separated: xy, xz, yz.
+    #[arg(long, default_value = "xy,xz,yz", value_delimiter = ',')]
+    axes: Vec<String>,
+    #[command(flatten)]
+    view: ViewArgs,
+    /// Output WAV file.
+    #[arg(short, long, default_value = "isoscope.wav")]
+    output: PathBuf,
+    /// Audio sample rate in Hz (48000, 96000, 192000...).
+    #[arg(long, default_value_t = 48_000)]
+    audio_rate: u32,
+    /// Seconds of audio (the frame repeats).
+    #[arg(long, default_value_t = 5.0)]
+    seconds: f64,
+    /// Largest step per sample while lit, in DAC LSB (default: one full-scale
+    /// line per millisecond at the audio rate).
+    #[arg(long)]
+    lit_step: Option<f32>,
+    /// Add a third channel with the beam (+1 lit, -1 blanked) for a Z input.
+    #[arg(long)]
+    beam_channel: bool,
+    /// Beam channel inverted (for Z inputs that blank on a positive voltage).
+    #[arg(long)]
+    invert_beam: bool,
+    /// 32-bit float samples instead of 16-bit PCM.
+    #[arg(long)]
+    float: bool,
 }
 
 #[derive(Args, Debug, Clone, Copy)]
@@ -391,6 +444,9 @@ fn levels_for(given: &[f32], demo: Option<DemoSpec>) -> Result<Vec<f32>> {
 }
 
 fn render(args: &RenderArgs) -> Result<()> {
+    if let Some(path) = &args.animate {
+        return render_animation(args, path);
+    }
     let scene = build_scene(&args.scene)?;
     let mut cfg = PhosphorConfig::with_size(args.size, args.size);
     cfg.bits = args.scene.view.bits;
@@ -415,15 +471,54 @@ fn render(args: &RenderArgs) -> Result<()> {
     Ok(())
 }
 
+fn render_animation(args: &RenderArgs, path: &std::path::Path) -> Result<()> {
+    let format = AnimFormat::from_path(path)
+        .with_context(|| format!("{}: an animation is a .gif or an (animated) .png", path.display()))?;
+    let (surface, cfg) = prepare(
+        &args.scene.source,
+        &args.scene.levels,
+        &args.scene.axes,
+        &args.scene.view,
+        args.scene.beam.order,
+        scene_beam(&args.scene),
+    )?;
+    let mut picture = PhosphorConfig::with_size(args.size, args.size);
+    picture.bits = args.scene.view.bits;
+    picture.show_blanked = args.show_blanked;
+    let anim = AnimConfig { frames: args.anim_frames, turn_deg: args.turn, format, ..AnimConfig::default() };
+    let f = std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+    let progress = Progress::new("animating", anim.frames as usize);
+    let st = animate_surface(&surface, &cfg, picture, &anim, std::io::BufWriter::new(f), Some(&progress))
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    eprintln!(
+        "isoscope-sim: wrote {} ({} frames, {}x{}, {:.1} degrees a frame, {} bytes)",
+        path.display(),
+        st.frames,
+        st.width,
+        st.height,
+        st.step_deg,
+        st.bytes
+    );
+    Ok(())
+}
+
 fn scene_beam(args: &StatsArgs) -> BeamConfig {
     BeamConfig { bits: args.view.bits, lit_step: args.beam.lit_step, ..BeamConfig::default() }
 }
 
-fn build_scene(args: &StatsArgs) -> Result<Scene> {
-    let (vol, demo) = load(&args.source)?;
-    let levels = levels_for(&args.levels, demo)?;
-    let planes = planes(&args.axes)?;
-    let v = &args.view;
+/// Load the volume, contour it once (keeping 3D geometry) and make the
+/// scene configuration: everything a frame, an animation or a WAV needs.
+fn prepare(
+    source: &Source,
+    given_levels: &[f32],
+    axes: &[String],
+    v: &ViewArgs,
+    order: OrderArg,
+    beam: BeamConfig,
+) -> Result<(Surface, SceneConfig)> {
+    let (vol, demo) = load(source)?;
+    let levels = levels_for(given_levels, demo)?;
+    let planes = planes(axes)?;
     if v.every == 0 {
         bail!("--every must be at least 1");
     }
@@ -444,24 +539,69 @@ fn build_scene(args: &StatsArgs) -> Result<Scene> {
         levels,
         every: v.every,
         view,
-        beam: scene_beam(args),
-        order: match args.beam.order {
+        beam,
+        order: match order {
             OrderArg::Optimized => Order::Optimized,
             OrderArg::Input => Order::Input,
         },
         ..SceneConfig::default()
     };
     let Dims(nx, ny, nz) = vol.dims;
-    fn run<T: Sample>(data: &[T], d: (usize, usize, usize), cfg: &SceneConfig) -> Result<Scene> {
-        scene::build(&Volume::new(data, d.0, d.1, d.2)?, cfg)
+    fn run<T: Sample>(data: &[T], d: (usize, usize, usize), cfg: &SceneConfig) -> Result<Surface> {
+        scene::contour_surface(&Volume::new(data, d.0, d.1, d.2)?, cfg)
     }
     let d = (nx, ny, nz);
-    match &vol.samples {
+    let surface = match &vol.samples {
         Samples::U8(s) => run(s, d, &cfg),
         Samples::U16(s) => run(s, d, &cfg),
         Samples::I16(s) => run(s, d, &cfg),
         Samples::F32(s) => run(s, d, &cfg),
+    }?;
+    Ok((surface, cfg))
+}
+
+fn build_scene(args: &StatsArgs) -> Result<Scene> {
+    let (surface, cfg) =
+        prepare(&args.source, &args.levels, &args.axes, &args.view, args.beam.order, scene_beam(args))?;
+    let mut scene = surface.scene(&cfg)?;
+    // The contouring happened in `prepare`: count it in the pipeline.
+    scene.seconds[0] += surface.seconds;
+    Ok(scene)
+}
+
+fn wav(args: &WavArgs) -> Result<()> {
+    let mut beam = audio_beam(args.audio_rate, args.view.bits);
+    if let Some(step) = args.lit_step {
+        beam.lit_step = step;
     }
+    let (surface, cfg) =
+        prepare(&args.source, &args.levels, &args.axes, &args.view, OrderArg::Optimized, beam)?;
+    let scene = surface.scene(&cfg)?;
+    let frame = refresh_samples(&scene.list, &beam);
+    let wcfg = WavConfig {
+        rate_hz: args.audio_rate,
+        channels: if args.beam_channel { WavChannels::WithBeam } else { WavChannels::Stereo },
+        format: if args.float { WavFormat::Float32 } else { WavFormat::Pcm16 },
+        seconds: args.seconds,
+        bits: args.view.bits,
+        invert_beam: args.invert_beam,
+        ..WavConfig::default()
+    };
+    let st = write_wav_file(&args.output, &frame, &wcfg)
+        .with_context(|| format!("cannot write {}", args.output.display()))?;
+    eprintln!(
+        "isoscope-sim: wrote {} ({:.2} s at {} Hz, {} channels; one frame is {} samples: {:.1} frames/s)",
+        args.output.display(),
+        st.seconds,
+        args.audio_rate,
+        if args.beam_channel { 3 } else { 2 },
+        st.frame_samples,
+        st.refresh_hz
+    );
+    if st.clipped > 0 {
+        eprintln!("isoscope-sim: warning: {} samples were outside the DAC range and clipped", st.clipped);
+    }
+    Ok(())
 }
 
 fn stats(args: &StatsArgs) -> Result<()> {
@@ -492,6 +632,7 @@ fn main() -> ExitCode {
         Cmd::Contour(a) => contour(a),
         Cmd::Stats(a) => stats(a),
         Cmd::Render(a) => render(a),
+        Cmd::Wav(a) => wav(a),
         Cmd::Info(a) => {
             load(&a.source).map(|(v, _)| print!("{}", isoscope_sim::info::summarize(&v, a.bins).report()))
         }

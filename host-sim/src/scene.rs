@@ -8,6 +8,7 @@
 use anyhow::{Context, Result, anyhow};
 use isoscope_core::beam::{BeamConfig, FrameStats, Park, Scheduler, frame_stats};
 use isoscope_core::command::{Command, Point3};
+use isoscope_core::dac::Sample as DacSample;
 use isoscope_core::display::{
     DisplayStore, OptimizeConfig, OptimizeStats, OrderConfig, OrderStats, ScratchStore,
 };
@@ -30,6 +31,19 @@ pub enum Order {
     Input,
 }
 
+/// How the view is scaled to the screen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ViewFit {
+    /// The projected bounding box fills the screen ([`ViewTransform::fit`]):
+    /// the largest picture for one still view (the default).
+    #[default]
+    Box,
+    /// The bounding sphere fills the screen ([`ViewTransform::fit_sphere`]):
+    /// the scale does not depend on the angles, so a spinning view does not
+    /// breathe. For animation.
+    Sphere,
+}
+
 /// What to put on the screen.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SceneConfig {
@@ -47,6 +61,8 @@ pub struct SceneConfig {
     pub order: Order,
     /// Collinear merge tolerance, DAC units.
     pub tolerance: f32,
+    /// How the view is scaled to the screen.
+    pub fit: ViewFit,
 }
 
 impl Default for SceneConfig {
@@ -59,6 +75,7 @@ impl Default for SceneConfig {
             beam: BeamConfig::default(),
             order: Order::Optimized,
             tolerance: OptimizeConfig::default().tolerance,
+            fit: ViewFit::Box,
         }
     }
 }
@@ -98,15 +115,10 @@ impl SurfaceSink for Project<'_> {
 
 /// Build one frame of `volume` as `cfg` says.
 pub fn build<T: Sample>(volume: &Volume<'_, T>, cfg: &SceneConfig) -> Result<Scene> {
-    if cfg.levels.is_empty() {
-        return Err(anyhow!("no contour level"));
-    }
-    if cfg.every == 0 {
-        return Err(anyhow!("the slice stride must be at least 1"));
-    }
+    check_contouring(cfg)?;
     cfg.beam.validate().context("invalid beam settings")?;
     let (nx, ny, nz) = volume.dims();
-    let view = ViewTransform::fit(&cfg.view, Bounds::of_volume(nx, ny, nz)?).context("invalid view")?;
+    let view = view_transform(cfg, Bounds::of_volume(nx, ny, nz)?)?;
     let t0 = Instant::now();
     let mut commands = Vec::new();
     for &plane in &cfg.planes {
@@ -116,6 +128,92 @@ pub fn build<T: Sample>(volume: &Volume<'_, T>, cfg: &SceneConfig) -> Result<Sce
                 .map_err(|e| anyhow!("contouring {plane} slice {index}: {e}"))?;
         }
     }
+    finish(commands, cfg, t0)
+}
+
+/// The chicken-wire surface in voxel coordinates: contoured once, then
+/// projected for any number of views ([`Surface::scene`]), as a spinning
+/// view needs (the firmware keeps the same `Point3` commands and re-projects
+/// them when the view changes).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Surface {
+    /// The contour commands of every slice, in [`build`]'s order.
+    pub commands: Vec<Command<Point3>>,
+    /// The volume's bounds, which the view fits to the screen.
+    pub bounds: Bounds,
+    /// Seconds the contouring took.
+    pub seconds: f64,
+}
+
+struct Keep<'a>(&'a mut Vec<Command<Point3>>);
+
+impl SurfaceSink for Keep<'_> {
+    type Error = Infallible;
+    fn command(&mut self, _: SliceId, _: usize, c: Command<Point3>) -> Result<(), Infallible> {
+        self.0.push(c);
+        Ok(())
+    }
+}
+
+/// Contour the slices `cfg` chooses (its `planes`, `levels` and `every`;
+/// the view, beam and ordering are not used here) into a [`Surface`].
+///
+/// # Errors
+/// No level, a stride of 0, an empty volume, or a contouring error.
+pub fn contour_surface<T: Sample>(volume: &Volume<'_, T>, cfg: &SceneConfig) -> Result<Surface> {
+    check_contouring(cfg)?;
+    let (nx, ny, nz) = volume.dims();
+    let bounds = Bounds::of_volume(nx, ny, nz)?;
+    let t0 = Instant::now();
+    let mut commands = Vec::new();
+    for &plane in &cfg.planes {
+        for index in (0..volume.slice_count(plane)).step_by(cfg.every) {
+            let mut sink = Keep(&mut commands);
+            contour_slice(volume, SliceId { plane, index }, &cfg.levels, Traversal::Corrected, &mut sink)
+                .map_err(|e| anyhow!("contouring {plane} slice {index}: {e}"))?;
+        }
+    }
+    Ok(Surface { commands, bounds, seconds: t0.elapsed().as_secs_f64() })
+}
+
+impl Surface {
+    /// The frame of this surface under `cfg`'s view, fit, beam and ordering
+    /// (its `planes`, `levels` and `every` were used when contouring): the
+    /// same display list and frame as [`build`] on the volume with the same
+    /// `cfg`. The first of the scene's `seconds` is the projection alone.
+    ///
+    /// # Errors
+    /// Invalid view or beam settings, or a display list too large.
+    pub fn scene(&self, cfg: &SceneConfig) -> Result<Scene> {
+        cfg.beam.validate().context("invalid beam settings")?;
+        let view = view_transform(cfg, self.bounds)?;
+        let t0 = Instant::now();
+        let commands = self.commands.iter().map(|c| c.map(|p| view.project(p))).collect();
+        finish(commands, cfg, t0)
+    }
+}
+
+fn check_contouring(cfg: &SceneConfig) -> Result<()> {
+    if cfg.levels.is_empty() {
+        return Err(anyhow!("no contour level"));
+    }
+    if cfg.every == 0 {
+        return Err(anyhow!("the slice stride must be at least 1"));
+    }
+    Ok(())
+}
+
+fn view_transform(cfg: &SceneConfig, bounds: Bounds) -> Result<ViewTransform> {
+    match cfg.fit {
+        ViewFit::Box => ViewTransform::fit(&cfg.view, bounds),
+        ViewFit::Sphere => ViewTransform::fit_sphere(&cfg.view, bounds),
+    }
+    .context("invalid view")
+}
+
+/// The display list, its optimisation and ordering, and the frame
+/// statistics of projected commands; `t0` is when they started coming.
+fn finish(commands: Vec<Command<ScreenPoint>>, cfg: &SceneConfig, t0: Instant) -> Result<Scene> {
     let cap = commands.len().max(1);
     let mut list = DisplayStore::with_storage(vec![ScreenPoint::default(); cap], vec![0u8; cap]);
     for c in commands {
@@ -158,17 +256,36 @@ pub fn build<T: Sample>(volume: &Volume<'_, T>, cfg: &SceneConfig) -> Result<Sce
 /// park position is for idle time), so the closing jump of the loop counts
 /// as blanked travel.
 pub fn refresh_stats(list: &HostDisplayList, beam: &BeamConfig) -> FrameStats {
-    let Some(last) = list.polylines().last() else {
+    let Some(mut s) = refresh_scheduler(list, beam) else {
         return frame_stats(list.commands(), beam);
     };
+    for _ in &mut s {}
+    s.stats()
+}
+
+/// The samples of one frame in a refresh loop, as [`refresh_stats`] counts
+/// them: the frame starts where it ends, so playing the samples over and
+/// over is the refresh loop, seamless (the loop's closing jump is the
+/// frame's first blanked jump). The last sample is blanked. Empty for an
+/// empty list.
+pub fn refresh_samples(list: &HostDisplayList, beam: &BeamConfig) -> Vec<DacSample> {
+    refresh_scheduler(list, beam).map(Iterator::collect).unwrap_or_default()
+}
+
+/// The scheduler of one refresh-loop frame: no return to the park
+/// position, starting where the last polyline ends; `None` for an empty
+/// list.
+fn refresh_scheduler<'a>(
+    list: &'a HostDisplayList,
+    beam: &BeamConfig,
+) -> Option<Scheduler<impl Iterator<Item = Command<ScreenPoint>> + 'a>> {
+    let last = list.polylines().last()?;
     let end = match (last.closed, last.points.first(), last.points.last()) {
         (true, Some(&p), _) | (false, _, Some(&p)) => p,
         _ => ScreenPoint::new(f32::NAN, f32::NAN),
     };
     let cfg = BeamConfig { park: Park { return_at_end: false, ..beam.park }, ..*beam };
-    let mut s = Scheduler::with_start(list.commands(), &cfg, end);
-    for _ in &mut s {}
-    s.stats()
+    Some(Scheduler::with_start(list.commands(), &cfg, end))
 }
 
 impl Scene {

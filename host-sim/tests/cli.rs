@@ -678,3 +678,27 @@ fn contour_svg_and_slice_stride() {
     let out = run(&["contour", "--demo", "torus:16", "--every", "0"]);
     assert!(!out.status.success());
 }
+
+/// `wav` writes the beam as audio; `render --animate` a turning GIF.
+#[test]
+fn wav_and_animation() {
+    let dir = TempDir::new("wav-anim");
+    let wav = path_str(&dir.0.join("s.wav"));
+    let out = run(&["wav", "--demo", "sphere:10", "-o", &wav, "--seconds", "0.25", "--audio-rate", "96000"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let b = std::fs::read(&wav).unwrap();
+    assert_eq!(&b[..4], b"RIFF");
+    assert_eq!(&b[8..12], b"WAVE");
+    // 0.25 s at 96 kHz, 2 channels of 16 bits.
+    assert!(b.len() >= 24_000 * 4, "{} bytes", b.len());
+    let gif = path_str(&dir.0.join("a.gif"));
+    let out = run(&["render", "--demo", "torus:12", "--size", "64", "--animate", &gif, "--anim-frames", "6"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(&std::fs::read(&gif).unwrap()[..6], b"GIF89a");
+    let out = run(&["render", "--demo", "torus:12", "--animate", &path_str(&dir.0.join("a.bmp"))]);
+    assert!(!out.status.success());
+    assert!(text(&out.stderr).contains(".gif"), "{}", text(&out.stderr));
+    let out = run(&["wav", "--demo", "torus:12", "--audio-rate", "0", "-o", &wav]);
+    assert!(!out.status.success());
+    assert!(text(&out.stderr).starts_with("isoscope-sim: error: "));
+}
