@@ -1,6 +1,8 @@
 //! isoscope's host side: the same `isoscope-core` under `std`.
 //!
 //! - [`volume`]: volume sources (raw files, built-in demos) and sample types.
+//! - [`formats`]: volume file formats (NRRD, NIfTI-1, MRC/CCP4, Gaussian
+//!   cube, VTK legacy), one module each.
 //! - [`contour`]: parallel chicken-wire contouring of a volume into records,
 //!   and their CSV export.
 //! - [`info`]: a volume's summary, histogram and suggested levels.
@@ -18,6 +20,7 @@
 
 pub mod animate;
 pub mod contour;
+pub mod formats;
 pub mod info;
 pub mod phosphor;
 pub mod progress;

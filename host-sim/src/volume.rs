@@ -216,14 +216,17 @@ impl LoadedVolume {
         Ok(Self { dims, samples: Samples::U8(body[..need].to_vec()), spacing: UNIT_SPACING })
     }
 
-    /// Read a volume file whose format its name tells (`.den`).
+    /// Read a volume file whose format its name tells (`.den`, and those of
+    /// [`crate::formats::Format::from_name`]) or, failing that, its first
+    /// bytes ([`crate::formats::Format::sniff`]); `Ok(None)` for any other
+    /// file (a raw one). A file holding several volumes gives its first.
     pub fn read_known(path: &Path) -> Result<Option<Self>> {
         match path.extension().and_then(|e| e.to_str()) {
             Some("den") => {
                 let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
                 Self::from_den(&bytes).with_context(|| format!("cannot load {}", path.display())).map(Some)
             }
-            _ => Ok(None),
+            _ => Ok(crate::formats::read(path, &crate::formats::Options::default())?.map(|l| l.volume)),
         }
     }
 

@@ -1,0 +1,623 @@
+//! Volume file formats: [`nrrd`], [`nifti`] (NIfTI-1), [`mrc`] (MRC/CCP4),
+//! [`cube`] (Gaussian cube) and [`vtk`] (VTK legacy `STRUCTURED_POINTS`),
+//! one module each, and what they share: gzip, byte order, sample types and
+//! axis order.
+//!
+//! Every reader returns a [`LoadedVolume`] in the one layout the core wants:
+//! dims `(nx, ny, nz)`, samples x fastest, and the voxel spacing the file
+//! gives (`[1, 1, 1]` when it gives none). A file's sample type is loaded as
+//! the closest of the four the core takes ([`Elem::loads_as`]): `uint8` as
+//! `u8`; `int8` and `int16` as `i16`; `uint16` as `u16`; `float16` and
+//! `float32` as `f32`; `int32`, `uint32`, `int64`, `uint64` and `float64` as
+//! `f32` too, which rounds (the reader then says so in [`Loaded::notes`]).
+//!
+//! [`read`] picks the reader from the file name, or else from the first
+//! bytes; [`crate::volume::LoadedVolume::read_known`] calls it. Errors name
+//! the file and what is wrong with it (truncated data, extents that do not
+//! match the size, an unsupported type), never panic, and never allocate
+//! for data before the file has shown it holds that data (a gzip stream
+//! inflates to at most what the header asks for, where there is a header).
+
+use crate::volume::{Dims, Dtype, LoadedVolume, Samples};
+use anyhow::{Context, Result, bail};
+use std::io::Read;
+use std::path::Path;
+
+pub mod cube;
+pub mod mrc;
+pub mod nifti;
+pub mod nrrd;
+pub mod vtk;
+
+/// A volume file format.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Format {
+    /// NRRD (`.nrrd`, or a detached `.nhdr` header), raw, gzip or ASCII encoded.
+    Nrrd,
+    /// NIfTI-1 (`.nii`, `.nii.gz`, or a `.hdr` + `.img` pair).
+    Nifti,
+    /// MRC (cryo-EM) or CCP4 (crystallography) map.
+    Mrc,
+    /// Gaussian cube.
+    Cube,
+    /// VTK legacy `STRUCTURED_POINTS`, ASCII or binary.
+    Vtk,
+}
+
+impl Format {
+    /// Every format.
+    pub const ALL: [Format; 5] = [Format::Nrrd, Format::Nifti, Format::Mrc, Format::Cube, Format::Vtk];
+
+    /// Its usual name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Format::Nrrd => "NRRD",
+            Format::Nifti => "NIfTI-1",
+            Format::Mrc => "MRC/CCP4",
+            Format::Cube => "Gaussian cube",
+            Format::Vtk => "VTK legacy",
+        }
+    }
+
+    /// The format a file name tells (case-insensitive; any of these may end
+    /// in `.gz`): `.nrrd`, `.nhdr`; `.nii`, `.hdr`; `.mrc`, `.mrcs`, `.map`,
+    /// `.ccp4`, `.rec`; `.cube`, `.cub`; `.vtk`.
+    pub fn from_name(path: &Path) -> Option<Format> {
+        let name = path.file_name()?.to_str()?.to_ascii_lowercase();
+        let name = name.strip_suffix(".gz").unwrap_or(&name);
+        let ext = name.rsplit_once('.')?.1;
+        Some(match ext {
+            "nrrd" | "nhdr" => Format::Nrrd,
+            "nii" | "hdr" => Format::Nifti,
+            "mrc" | "mrcs" | "map" | "ccp4" | "rec" => Format::Mrc,
+            "cube" | "cub" => Format::Cube,
+            "vtk" => Format::Vtk,
+            _ => return None,
+        })
+    }
+
+    /// The format the first bytes of a file show (gunzipped already), if
+    /// they have a signature: `NRRD000`, `# vtk DataFile`, NIfTI-1's `n+1`
+    /// at byte 344, MRC/CCP4's `MAP ` at byte 208. (A cube file has none.)
+    pub fn sniff(head: &[u8]) -> Option<Format> {
+        if head.starts_with(b"NRRD000") {
+            Some(Format::Nrrd)
+        } else if head.starts_with(b"# vtk DataFile") {
+            Some(Format::Vtk)
+        } else if head.get(344..348) == Some(b"n+1\0") && nifti::sizeof_hdr_endian(head).is_some() {
+            Some(Format::Nifti)
+        } else if head.get(208..212) == Some(b"MAP ") && head.len() >= 1024 {
+            Some(Format::Mrc)
+        } else {
+            None
+        }
+    }
+}
+
+/// Which volume to take from a file that holds several.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash)]
+pub struct Options {
+    /// Index from 0 of the volume to load: a NIfTI's time point (the 4th
+    /// dimension and on, flattened), a cube's orbital (or value per point),
+    /// a VTK file's point scalar array (in file order). Default: the first.
+    pub index: usize,
+}
+
+/// A volume read from a file, and what the reader has to say about it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Loaded {
+    /// The volume.
+    pub volume: LoadedVolume,
+    /// Its file's format.
+    pub format: Format,
+    /// Remarks for the user: samples converted with rounding, one of several
+    /// volumes taken, a skew ignored, a unit.
+    pub notes: Vec<String>,
+}
+
+/// Read `path` if its name or (failing that) its first bytes tell one of
+/// these formats; `Ok(None)` if they tell none, or the file cannot be opened
+/// to look (the caller's raw reader then reports that).
+pub fn read(path: &Path, opts: &Options) -> Result<Option<Loaded>> {
+    let format = match Format::from_name(path).or_else(|| sniff_file(path)) {
+        Some(f) => f,
+        None => return Ok(None),
+    };
+    read_as(path, format, opts).map(Some)
+}
+
+/// Read `path` as `format`.
+pub fn read_as(path: &Path, format: Format, opts: &Options) -> Result<Loaded> {
+    match format {
+        Format::Nrrd => nrrd::read(path, opts),
+        Format::Nifti => nifti::read(path, opts),
+        Format::Mrc => mrc::read(path, opts),
+        Format::Cube => cube::read(path, opts),
+        Format::Vtk => vtk::read(path, opts),
+    }
+    .with_context(|| format!("cannot load {} as {}", path.display(), format.name()))
+}
+
+/// The format the first KiB of the file (gunzipped if need be) shows.
+fn sniff_file(path: &Path) -> Option<Format> {
+    let mut head = Vec::with_capacity(1024);
+    let f = std::fs::File::open(path).ok()?;
+    f.take(1024).read_to_end(&mut head).ok()?;
+    if is_gzip(&head) {
+        let f = std::fs::File::open(path).ok()?;
+        let mut inner = Vec::with_capacity(1024);
+        // A read error (a short or corrupt stream) still leaves what inflated.
+        let _ =
+            flate2::read::MultiGzDecoder::new(std::io::BufReader::new(f)).take(1024).read_to_end(&mut inner);
+        head = inner;
+    }
+    Format::sniff(&head)
+}
+
+/// Check that `opts` asks for the one volume of a single-volume format.
+pub(crate) fn single_volume(opts: &Options) -> Result<()> {
+    if opts.index > 0 {
+        bail!("the file holds one volume; volume {} was asked for", opts.index);
+    }
+    Ok(())
+}
+
+/// Read a whole file, naming it if that fails.
+pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>> {
+    std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))
+}
+
+/// Whether `bytes` start like a gzip stream.
+pub(crate) fn is_gzip(bytes: &[u8]) -> bool {
+    bytes.starts_with(&[0x1f, 0x8b])
+}
+
+/// Inflate a gzip stream (all its members), reading at most `limit` bytes
+/// out: the caller checks the length it gets.
+pub(crate) fn gunzip(bytes: &[u8], limit: usize) -> Result<Vec<u8>> {
+    let mut out = Vec::new();
+    flate2::read::MultiGzDecoder::new(bytes)
+        .take(limit as u64)
+        .read_to_end(&mut out)
+        .map_err(|e| anyhow::anyhow!("the gzip data is corrupt or cut short ({e})"))?;
+    Ok(out)
+}
+
+/// The whole file gunzipped when it is gzip, as it is otherwise.
+pub(crate) fn maybe_gunzip(bytes: Vec<u8>) -> Result<Vec<u8>> {
+    if is_gzip(&bytes) { gunzip(&bytes, usize::MAX).context("cannot gunzip the file") } else { Ok(bytes) }
+}
+
+/// Byte order of binary samples.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Endian {
+    /// Least significant byte first.
+    Little,
+    /// Most significant byte first.
+    Big,
+}
+
+/// A sample type as a file stores it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Elem {
+    /// Signed 8-bit.
+    I8,
+    /// Unsigned 8-bit.
+    U8,
+    /// Signed 16-bit.
+    I16,
+    /// Unsigned 16-bit.
+    U16,
+    /// Signed 32-bit.
+    I32,
+    /// Unsigned 32-bit.
+    U32,
+    /// Signed 64-bit.
+    I64,
+    /// Unsigned 64-bit.
+    U64,
+    /// IEEE 754 half.
+    F16,
+    /// IEEE 754 single.
+    F32,
+    /// IEEE 754 double.
+    F64,
+}
+
+impl Elem {
+    /// Bytes per sample.
+    pub fn size(self) -> usize {
+        match self {
+            Elem::I8 | Elem::U8 => 1,
+            Elem::I16 | Elem::U16 | Elem::F16 => 2,
+            Elem::I32 | Elem::U32 | Elem::F32 => 4,
+            Elem::I64 | Elem::U64 | Elem::F64 => 8,
+        }
+    }
+
+    /// Its name, as in `int16`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Elem::I8 => "int8",
+            Elem::U8 => "uint8",
+            Elem::I16 => "int16",
+            Elem::U16 => "uint16",
+            Elem::I32 => "int32",
+            Elem::U32 => "uint32",
+            Elem::I64 => "int64",
+            Elem::U64 => "uint64",
+            Elem::F16 => "float16",
+            Elem::F32 => "float32",
+            Elem::F64 => "float64",
+        }
+    }
+
+    /// The sample type it loads as.
+    pub fn loads_as(self) -> Dtype {
+        match self {
+            Elem::U8 => Dtype::U8,
+            Elem::I8 | Elem::I16 => Dtype::I16,
+            Elem::U16 => Dtype::U16,
+            _ => Dtype::F32,
+        }
+    }
+
+    /// Whether loading it as [`Elem::loads_as`] may round.
+    pub fn rounds(self) -> bool {
+        matches!(self, Elem::I32 | Elem::U32 | Elem::I64 | Elem::U64 | Elem::F64)
+    }
+
+    /// A note for [`Loaded::notes`] when loading it rounds.
+    pub(crate) fn note(self) -> Option<String> {
+        self.rounds().then(|| {
+            format!(
+                "{} samples are loaded as f32 ({})",
+                self.name(),
+                if self == Elem::F64 {
+                    "rounded to single precision"
+                } else {
+                    "exact up to 2^24 in magnitude"
+                }
+            )
+        })
+    }
+}
+
+/// Bytes of `dims` samples of `elem`, or an error if that overflows.
+pub(crate) fn byte_len(dims: &[usize], elem: Elem) -> Result<usize> {
+    dims.iter()
+        .try_fold(elem.size(), |a, &d| a.checked_mul(d))
+        .with_context(|| format!("the extents {dims:?} overflow"))
+}
+
+/// Decode binary samples; `bytes.len()` is a multiple of `elem.size()`
+/// (anything past the last whole sample is ignored).
+pub(crate) fn decode(bytes: &[u8], elem: Elem, endian: Endian) -> Samples {
+    fn words<const N: usize, T>(
+        bytes: &[u8],
+        endian: Endian,
+        le: fn([u8; N]) -> T,
+        be: fn([u8; N]) -> T,
+    ) -> Vec<T> {
+        let f = if endian == Endian::Little { le } else { be };
+        bytes.chunks_exact(N).map(|c| f(c.try_into().unwrap_or([0; N]))).collect()
+    }
+    match elem {
+        Elem::U8 => Samples::U8(bytes.to_vec()),
+        Elem::I8 => Samples::I16(bytes.iter().map(|&b| i16::from(b as i8)).collect()),
+        Elem::I16 => Samples::I16(words(bytes, endian, i16::from_le_bytes, i16::from_be_bytes)),
+        Elem::U16 => Samples::U16(words(bytes, endian, u16::from_le_bytes, u16::from_be_bytes)),
+        Elem::F16 => Samples::F32(
+            words(bytes, endian, u16::from_le_bytes, u16::from_be_bytes)
+                .into_iter()
+                .map(f16_to_f32)
+                .collect(),
+        ),
+        Elem::F32 => Samples::F32(words(bytes, endian, f32::from_le_bytes, f32::from_be_bytes)),
+        Elem::I32 => Samples::F32(
+            words(bytes, endian, i32::from_le_bytes, i32::from_be_bytes)
+                .into_iter()
+                .map(|v| v as f32)
+                .collect(),
+        ),
+        Elem::U32 => Samples::F32(
+            words(bytes, endian, u32::from_le_bytes, u32::from_be_bytes)
+                .into_iter()
+                .map(|v| v as f32)
+                .collect(),
+        ),
+        Elem::I64 => Samples::F32(
+            words(bytes, endian, i64::from_le_bytes, i64::from_be_bytes)
+                .into_iter()
+                .map(|v| v as f32)
+                .collect(),
+        ),
+        Elem::U64 => Samples::F32(
+            words(bytes, endian, u64::from_le_bytes, u64::from_be_bytes)
+                .into_iter()
+                .map(|v| v as f32)
+                .collect(),
+        ),
+        Elem::F64 => Samples::F32(
+            words(bytes, endian, f64::from_le_bytes, f64::from_be_bytes)
+                .into_iter()
+                .map(|v| v as f32)
+                .collect(),
+        ),
+    }
+}
+
+/// Samples as `f32` (exact for the integer types).
+pub(crate) fn to_f32(samples: Samples) -> Vec<f32> {
+    match samples {
+        Samples::U8(v) => v.into_iter().map(f32::from).collect(),
+        Samples::U16(v) => v.into_iter().map(f32::from).collect(),
+        Samples::I16(v) => v.into_iter().map(f32::from).collect(),
+        Samples::F32(v) => v,
+    }
+}
+
+/// An IEEE 754 half as a single (exact).
+pub(crate) fn f16_to_f32(h: u16) -> f32 {
+    let sign = u32::from(h >> 15) << 31;
+    let exp = u32::from((h >> 10) & 0x1f);
+    let man = u32::from(h & 0x3ff);
+    let bits = match (exp, man) {
+        (0, 0) => sign,
+        (0, m) => {
+            // Subnormal: m * 2^-24.
+            let v = m as f32 * (1.0 / 16_777_216.0);
+            return if sign != 0 { -v } else { v };
+        }
+        (0x1f, m) => sign | 0x7f80_0000 | (m << 13),
+        (e, m) => sign | ((e + 112) << 23) | (m << 13),
+    };
+    f32::from_bits(bits)
+}
+
+/// Samples from whitespace-separated numbers in text: exactly `count` of
+/// them taken from `tokens`, parsed as `elem` (integers must be whole and in
+/// range). `what` names the values in errors.
+pub(crate) fn parse_text<'a>(
+    tokens: &mut impl Iterator<Item = &'a str>,
+    count: usize,
+    elem: Elem,
+    what: &str,
+) -> Result<Samples> {
+    fn take<'a, T>(
+        tokens: &mut impl Iterator<Item = &'a str>,
+        count: usize,
+        what: &str,
+        elem: Elem,
+        conv: impl Fn(f64) -> Option<T>,
+    ) -> Result<Vec<T>> {
+        // Grow as values come: the count is the file's word, not yet its data.
+        let mut out = Vec::with_capacity(count.min(1 << 20));
+        for i in 0..count {
+            let Some(tok) = tokens.next() else {
+                bail!("the {what} are truncated: {i} of {count} values");
+            };
+            let v = parse_number(tok).and_then(&conv).with_context(|| {
+                format!("value {} of the {what}, `{tok}`, is not a valid {}", i + 1, elem.name())
+            })?;
+            out.push(v);
+        }
+        Ok(out)
+    }
+    fn int<T: TryFrom<i64>>(v: f64) -> Option<T> {
+        if v.fract() != 0.0 || !(-9.3e18..9.3e18).contains(&v) {
+            return None;
+        }
+        T::try_from(v as i64).ok()
+    }
+    Ok(match elem {
+        Elem::U8 => Samples::U8(take(tokens, count, what, elem, int::<u8>)?),
+        Elem::I8 => Samples::I16(take(tokens, count, what, elem, |v| int::<i8>(v).map(i16::from))?),
+        Elem::I16 => Samples::I16(take(tokens, count, what, elem, int::<i16>)?),
+        Elem::U16 => Samples::U16(take(tokens, count, what, elem, int::<u16>)?),
+        _ => Samples::F32(take(tokens, count, what, elem, |v| Some(v as f32))?),
+    })
+}
+
+/// A number in text: decimal, `nan`, `inf`, or with a Fortran `D` exponent.
+pub(crate) fn parse_number(tok: &str) -> Option<f64> {
+    tok.parse().ok().or_else(|| tok.replace(['D', 'd'], "E").parse().ok())
+}
+
+/// Reorder samples stored with file axes of extents `n` (fastest first),
+/// file axis `i` running along space axis `axis[i]` (0 = x, 1 = y, 2 = z;
+/// a permutation), into x-fastest order. Returns them with `(nx, ny, nz)`.
+pub(crate) fn permute(samples: Samples, n: [usize; 3], axis: [usize; 3]) -> (Samples, Dims) {
+    let mut d = [0usize; 3];
+    for i in 0..3 {
+        d[axis[i]] = n[i];
+    }
+    let dims = Dims(d[0], d[1], d[2]);
+    if axis == [0, 1, 2] {
+        return (samples, dims);
+    }
+    let space_stride = [1, d[0], d[0] * d[1]];
+    let s = [space_stride[axis[0]], space_stride[axis[1]], space_stride[axis[2]]];
+    fn go<T: Copy + Default>(v: &[T], n: [usize; 3], s: [usize; 3]) -> Vec<T> {
+        let mut out = vec![T::default(); v.len()];
+        let mut src = v.iter();
+        for k in 0..n[2] {
+            for j in 0..n[1] {
+                let base = k * s[2] + j * s[1];
+                for i in 0..n[0] {
+                    if let (Some(&x), Some(o)) = (src.next(), out.get_mut(base + i * s[0])) {
+                        *o = x;
+                    }
+                }
+            }
+        }
+        out
+    }
+    let samples = match samples {
+        Samples::U8(v) => Samples::U8(go(&v, n, s)),
+        Samples::U16(v) => Samples::U16(go(&v, n, s)),
+        Samples::I16(v) => Samples::I16(go(&v, n, s)),
+        Samples::F32(v) => Samples::F32(go(&v, n, s)),
+    };
+    (samples, dims)
+}
+
+/// A usable voxel size from a file's word: its magnitude when finite and
+/// non-zero, else 1.
+pub(crate) fn voxel_size(v: f64) -> f32 {
+    let a = v.abs() as f32;
+    if a.is_finite() && a > 0.0 { a } else { 1.0 }
+}
+
+/// A text line's bytes as a trimmed `str` (lossy: header lines are ASCII).
+pub(crate) fn text(line: &[u8]) -> String {
+    String::from_utf8_lossy(line).trim().to_string()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_tell_formats() {
+        for (name, f) in [
+            ("a.nrrd", Format::Nrrd),
+            ("a.NHDR", Format::Nrrd),
+            ("a.nii", Format::Nifti),
+            ("a.nii.gz", Format::Nifti),
+            ("a.hdr", Format::Nifti),
+            ("emd_3001.map.gz", Format::Mrc),
+            ("x.ccp4", Format::Mrc),
+            ("x.mrcs", Format::Mrc),
+            ("N2O_homo+lumo.cube.gz", Format::Cube),
+            ("a.cub", Format::Cube),
+            ("a.vtk", Format::Vtk),
+        ] {
+            assert_eq!(Format::from_name(Path::new(name)), Some(f), "{name}");
+        }
+        for name in ["a.raw", "a.den", "a", "a.gz", "nii"] {
+            assert_eq!(Format::from_name(Path::new(name)), None, "{name}");
+        }
+    }
+
+    #[test]
+    fn first_bytes_tell_formats_without_a_known_name() {
+        let nii = nifti::tests::file(&[2, 1, 1], 2, 8, [1.0; 3], (0.0, 0.0), b"n+1\0", false, &[3, 4]);
+        let mut mrc = vec![0u8; 1024];
+        mrc[208..212].copy_from_slice(b"MAP ");
+        assert_eq!(Format::sniff(b"NRRD0005\ntype: uchar"), Some(Format::Nrrd));
+        assert_eq!(Format::sniff(b"# vtk DataFile Version 2.0\n"), Some(Format::Vtk));
+        assert_eq!(Format::sniff(&nii), Some(Format::Nifti));
+        assert_eq!(Format::sniff(&mrc), Some(Format::Mrc));
+        assert_eq!(Format::sniff(&mrc[..1000]), None);
+        assert_eq!(Format::sniff(&[0u8; 2048]), None);
+        let dir = std::env::temp_dir().join(format!("isoscope-sniff-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("scan.bin");
+        std::fs::write(&path, &nii).unwrap();
+        let l = read(&path, &Options::default()).unwrap().unwrap();
+        assert_eq!((l.format, l.volume.samples), (Format::Nifti, Samples::U8(vec![3, 4])));
+        // Gzip compressed, still sniffed.
+        let mut z = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+        std::io::Write::write_all(&mut z, &nii).unwrap();
+        std::fs::write(&path, z.finish().unwrap()).unwrap();
+        assert_eq!(read(&path, &Options::default()).unwrap().unwrap().format, Format::Nifti);
+        // Raw samples, and a missing file: not this module's (the raw reader reports).
+        std::fs::write(&path, [0u8; 400]).unwrap();
+        assert!(read(&path, &Options::default()).unwrap().is_none());
+        assert!(read(&dir.join("missing.raw"), &Options::default()).unwrap().is_none());
+        // A known name whose file is missing: an error naming it.
+        let e = format!("{:#}", read(&dir.join("missing.nrrd"), &Options::default()).unwrap_err());
+        assert!(e.contains("cannot load") && e.contains("missing.nrrd") && e.contains("as NRRD"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn decode_every_type_both_orders() {
+        let le = |v: &[u8]| decode(v, Elem::I16, Endian::Little);
+        assert_eq!(le(&[0x34, 0x12, 0xff, 0xff]), Samples::I16(vec![0x1234, -1]));
+        assert_eq!(decode(&[0x12, 0x34], Elem::U16, Endian::Big), Samples::U16(vec![0x1234]));
+        assert_eq!(decode(&[0x80, 0x7f], Elem::I8, Endian::Big), Samples::I16(vec![-128, 127]));
+        assert_eq!(decode(&1.5f32.to_be_bytes(), Elem::F32, Endian::Big), Samples::F32(vec![1.5]));
+        assert_eq!(decode(&(-7i32).to_le_bytes(), Elem::I32, Endian::Little), Samples::F32(vec![-7.0]));
+        assert_eq!(decode(&u32::MAX.to_be_bytes(), Elem::U32, Endian::Big), Samples::F32(vec![4294967296.0]));
+        assert_eq!(decode(&(-3i64).to_be_bytes(), Elem::I64, Endian::Big), Samples::F32(vec![-3.0]));
+        assert_eq!(decode(&9u64.to_le_bytes(), Elem::U64, Endian::Little), Samples::F32(vec![9.0]));
+        assert_eq!(decode(&0.1f64.to_be_bytes(), Elem::F64, Endian::Big), Samples::F32(vec![0.1]));
+        assert_eq!(decode(&[0x3c, 0x00], Elem::F16, Endian::Big), Samples::F32(vec![1.0]));
+    }
+
+    #[test]
+    fn halves() {
+        assert_eq!(f16_to_f32(0x3c00), 1.0);
+        assert_eq!(f16_to_f32(0xc000), -2.0);
+        assert_eq!(f16_to_f32(0x7bff), 65504.0);
+        assert_eq!(f16_to_f32(0x0001), 2f32.powi(-24));
+        assert_eq!(f16_to_f32(0x8001), -(2f32.powi(-24)));
+        assert_eq!(f16_to_f32(0x3555), 0.333_251_95);
+        assert_eq!(f16_to_f32(0x7c00), f32::INFINITY);
+        assert!(f16_to_f32(0x7e00).is_nan());
+        assert_eq!(f16_to_f32(0x8000).to_bits(), (-0.0f32).to_bits());
+    }
+
+    #[test]
+    fn permute_puts_x_fastest() {
+        // File order z fastest (a cube file): value = 100 x + 10 y + z.
+        let (nx, ny, nz) = (2, 3, 4);
+        let mut file = Vec::new();
+        for x in 0..nx {
+            for y in 0..ny {
+                for z in 0..nz {
+                    file.push((100 * x + 10 * y + z) as f32);
+                }
+            }
+        }
+        let (s, d) = permute(Samples::F32(file), [nz, ny, nx], [2, 1, 0]);
+        assert_eq!(d, Dims(nx, ny, nz));
+        let Samples::F32(v) = s else { panic!() };
+        for z in 0..nz {
+            for y in 0..ny {
+                for x in 0..nx {
+                    assert_eq!(v[x + nx * (y + ny * z)], (100 * x + 10 * y + z) as f32);
+                }
+            }
+        }
+        // Identity leaves it alone.
+        let (s, d) = permute(Samples::U8(vec![1, 2, 3]), [3, 1, 1], [0, 1, 2]);
+        assert_eq!((s, d), (Samples::U8(vec![1, 2, 3]), Dims(3, 1, 1)));
+    }
+
+    #[test]
+    fn text_numbers() {
+        let mut t = "1 2.5e1 -3.0D-01 nan".split_ascii_whitespace();
+        let Samples::F32(v) = parse_text(&mut t, 4, Elem::F64, "values").unwrap() else { panic!() };
+        assert_eq!(&v[..3], [1.0, 25.0, -0.3]);
+        assert!(v[3].is_nan());
+        let e = |s: &str, elem| {
+            format!("{:#}", parse_text(&mut s.split_ascii_whitespace(), 3, elem, "data").unwrap_err())
+        };
+        assert!(e("1 2", Elem::U8).contains("truncated: 2 of 3"), "{}", e("1 2", Elem::U8));
+        assert!(e("1 256 3", Elem::U8).contains("value 2 of the data, `256`, is not a valid uint8"));
+        assert!(e("1 2.5 3", Elem::I16).contains("`2.5`"));
+        assert!(e("1 x 3", Elem::F32).contains("`x`"));
+        assert_eq!(
+            parse_text(&mut "-128 127".split(' '), 2, Elem::I8, "d").unwrap(),
+            Samples::I16(vec![-128, 127])
+        );
+    }
+
+    #[test]
+    fn gunzip_is_bounded_and_reports_corruption() {
+        use std::io::Write;
+        let mut z = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+        z.write_all(&[7u8; 1000]).unwrap();
+        let gz = z.finish().unwrap();
+        assert_eq!(gunzip(&gz, usize::MAX).unwrap(), vec![7u8; 1000]);
+        assert_eq!(gunzip(&gz, 10).unwrap().len(), 10);
+        let e = format!("{:#}", gunzip(&gz[..gz.len() / 2], usize::MAX).unwrap_err());
+        assert!(e.contains("corrupt or cut short"), "{e}");
+        let mut bad = gz.clone();
+        bad[12] ^= 0xff;
+        assert!(gunzip(&bad, usize::MAX).is_err());
+    }
+}

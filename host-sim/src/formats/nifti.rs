@@ -1,0 +1,413 @@
+//! NIfTI-1: a `.nii` file (header, extensions, data at `vox_offset`), gzip
+//! compressed or not, or a `.hdr` + `.img` pair; either byte order.
+//!
+//! The 348-byte header is parsed by the `nifti` crate; the byte order is
+//! the one in which `sizeof_hdr` reads 348. Data types: `uint8` loads as
+//! `u8`, `int8` and `int16` as `i16`, `uint16` as `u16`, `float32` as `f32`;
+//! `int32`, `uint32`, `int64`, `uint64` and `float64` as `f32` with a note;
+//! complex, RGB and 128-bit types are refused. A non-trivial `scl_slope` /
+//! `scl_inter` (slope neither 0 nor 1, or an intercept) is applied, giving
+//! `f32` samples. Spacing: `|pixdim[1..=3]|`. Dims: `dim[1..=3]`, missing
+//! ones 1; a file with more dimensions (`dim[4..]`, time and so on) holds
+//! several volumes, and [`Options::index`] picks one (default the first).
+//! The orientation (qform, sform) is not applied: x is the file's first axis.
+
+use super::{
+    Elem, Endian, Format, Loaded, Options, byte_len, decode, maybe_gunzip, read_file, to_f32, voxel_size,
+};
+use crate::volume::{Dims, LoadedVolume, Samples};
+use anyhow::{Context, Result, anyhow, bail};
+use nifti::{NiftiError, NiftiHeader, NiftiType};
+use std::path::{Path, PathBuf};
+
+/// Size of a NIfTI-1 header.
+pub const HEADER: usize = 348;
+
+/// The byte order in which a header's `sizeof_hdr` reads 348, if either.
+pub fn sizeof_hdr_endian(bytes: &[u8]) -> Option<Endian> {
+    let w: [u8; 4] = bytes.get(..4)?.try_into().ok()?;
+    if i32::from_le_bytes(w) == HEADER as i32 {
+        Some(Endian::Little)
+    } else if i32::from_be_bytes(w) == HEADER as i32 {
+        Some(Endian::Big)
+    } else {
+        None
+    }
+}
+
+/// Read a `.nii` or `.nii.gz` file, or a `.hdr` (`.hdr.gz`) whose data are
+/// in the `.img` (`.img.gz`) beside it.
+pub fn read(path: &Path, opts: &Options) -> Result<Loaded> {
+    let bytes = maybe_gunzip(read_file(path)?)?;
+    let h = header(&bytes)?;
+    if &h.magic == b"ni1\0" {
+        let img = image_path(path).with_context(|| {
+            format!(
+                "the header's magic `ni1` says the data are in a separate .img file, and no {} is there",
+                {
+                    let mut p = path.to_path_buf();
+                    p.set_extension("img");
+                    p.display().to_string()
+                }
+            )
+        })?;
+        let data = maybe_gunzip(read_file(&img)?)?;
+        let offset = offset(&h, &data, 0)?;
+        return volume(&h, &data, offset, opts)
+            .with_context(|| format!("in the image file {}", img.display()));
+    }
+    parse_header_and_data(&h, &bytes, opts)
+}
+
+/// Decode a single-file NIfTI-1 (`.nii`, already gunzipped).
+pub fn parse(bytes: &[u8], opts: &Options) -> Result<Loaded> {
+    let h = header(bytes)?;
+    if &h.magic == b"ni1\0" {
+        bail!(
+            "the header's magic `ni1` says the data are in a separate .img file; open the .hdr file instead"
+        );
+    }
+    parse_header_and_data(&h, bytes, opts)
+}
+
+fn parse_header_and_data(h: &NiftiHeader, bytes: &[u8], opts: &Options) -> Result<Loaded> {
+    let offset = offset(h, bytes, HEADER + 4)?;
+    volume(h, bytes, offset, opts)
+}
+
+/// The `.img` or `.img.gz` beside a `.hdr` or `.hdr.gz`, if there is one.
+fn image_path(hdr: &Path) -> Option<PathBuf> {
+    let name = hdr.file_name()?.to_str()?;
+    let lower = name.to_ascii_lowercase();
+    let stem = if lower.ends_with(".hdr.gz") {
+        &name[..name.len() - 7]
+    } else if lower.ends_with(".hdr") {
+        &name[..name.len() - 4]
+    } else {
+        name
+    };
+    ["img", "img.gz", "IMG", "IMG.GZ"]
+        .iter()
+        .map(|e| hdr.with_file_name(format!("{stem}.{e}")))
+        .find(|p| p.is_file())
+}
+
+/// Parse and check the 348-byte header.
+fn header(bytes: &[u8]) -> Result<NiftiHeader> {
+    if bytes.len() < HEADER {
+        bail!("the file is truncated: a NIfTI-1 header is {HEADER} bytes, the file has {}", bytes.len());
+    }
+    let Some(order) = sizeof_hdr_endian(bytes) else {
+        let w = [bytes[0], bytes[1], bytes[2], bytes[3]];
+        let (le, be) = (i32::from_le_bytes(w), i32::from_be_bytes(w));
+        if le == 540 || be == 540 {
+            bail!("this is a NIfTI-2 file (sizeof_hdr 540), which is not supported; only NIfTI-1");
+        }
+        bail!("not a NIfTI-1 file: sizeof_hdr reads {le} (little-endian) or {be} (big-endian), not {HEADER}");
+    };
+    let h = NiftiHeader::from_reader(&bytes[..HEADER]).map_err(|e| match e {
+        NiftiError::InvalidFormat => anyhow!(
+            "not a NIfTI-1 file: the magic at byte 344 is {:?}, not \"n+1\" or \"ni1\" (an Analyze 7.5 header?)",
+            String::from_utf8_lossy(&bytes[344..348])
+        ),
+        e => anyhow!("cannot parse the NIfTI-1 header: {e}"),
+    })?;
+    // The crate tells the byte order by dim[0]; sizeof_hdr must agree.
+    let crate_order = if h.endianness == nifti::Endianness::Little { Endian::Little } else { Endian::Big };
+    if crate_order != order {
+        let d = [bytes[40], bytes[41]];
+        let d0 = if order == Endian::Little { i16::from_le_bytes(d) } else { i16::from_be_bytes(d) };
+        bail!("the header's dim[0] is {d0}; it must be 1 to 7");
+    }
+    let n = usize::from(h.dim[0]);
+    if !(1..=7).contains(&n) {
+        bail!("the header's dim[0] is {}; it must be 1 to 7", h.dim[0] as i16);
+    }
+    if let Some(i) = (1..=n).find(|&i| h.dim[i] == 0 || h.dim[i] > i16::MAX as u16) {
+        bail!("the header's dim[{i}] is {}; every extent must be positive", h.dim[i] as i16);
+    }
+    Ok(h)
+}
+
+/// Where the data start: `vox_offset` (at least `min`, the end of the
+/// header and extension flag, in a single file).
+fn offset(h: &NiftiHeader, bytes: &[u8], min: usize) -> Result<usize> {
+    let v = h.vox_offset;
+    if !v.is_finite() || v < 0.0 || v.fract() != 0.0 || v > bytes.len() as f32 {
+        bail!("the header's vox_offset {v} is not a byte offset within the file ({} bytes)", bytes.len());
+    }
+    Ok((v as usize).max(min).min(bytes.len()))
+}
+
+/// The sample type of a NIfTI data type.
+fn elem(t: NiftiType) -> Result<Elem> {
+    Ok(match t {
+        NiftiType::Uint8 => Elem::U8,
+        NiftiType::Int8 => Elem::I8,
+        NiftiType::Int16 => Elem::I16,
+        NiftiType::Uint16 => Elem::U16,
+        NiftiType::Int32 => Elem::I32,
+        NiftiType::Uint32 => Elem::U32,
+        NiftiType::Int64 => Elem::I64,
+        NiftiType::Uint64 => Elem::U64,
+        NiftiType::Float32 => Elem::F32,
+        NiftiType::Float64 => Elem::F64,
+        t => bail!(
+            "the data type {t:?} (datatype {}) is not supported: only real scalar types (uint8, int8, int16, \
+             uint16, int32, uint32, int64, uint64, float32, float64)",
+            t as i16
+        ),
+    })
+}
+
+/// Decode volume `opts.index` from `bytes[offset..]`.
+fn volume(h: &NiftiHeader, bytes: &[u8], offset: usize, opts: &Options) -> Result<Loaded> {
+    let t = h
+        .data_type()
+        .map_err(|_| anyhow!("the header's datatype {} is not a NIfTI-1 data type", h.datatype))?;
+    let elem = elem(t)?;
+    let n = usize::from(h.dim[0]);
+    let ext = |i: usize| if i <= n { usize::from(h.dim[i]) } else { 1 };
+    let (nx, ny, nz) = (ext(1), ext(2), ext(3));
+    let all: Vec<usize> = (1..=n).map(ext).collect();
+    let need = byte_len(&all, elem)?;
+    // No overflow: `need` did not.
+    let frames: usize = (4..=7).map(ext).product();
+    let have = bytes.len() - offset;
+    let shape = all.iter().map(|d| d.to_string()).collect::<Vec<_>>().join("x");
+    if have != need {
+        bail!(
+            "the header's extents {shape} of {} need {need} bytes of data from byte {offset}, but the file has {have}{}",
+            elem.name(),
+            if have < need { " (truncated?)" } else { " (extents that do not match the file size)" }
+        );
+    }
+    if opts.index >= frames {
+        bail!("the file holds {frames} volume(s) of {nx}x{ny}x{nz}; volume {} was asked for", opts.index);
+    }
+    let one = byte_len(&[nx, ny, nz], elem)?;
+    let start = offset + opts.index * one;
+    let endian = if h.endianness == nifti::Endianness::Little { Endian::Little } else { Endian::Big };
+    let mut samples = decode(&bytes[start..start + one], elem, endian);
+    let mut notes: Vec<String> = elem.note().into_iter().collect();
+    if frames > 1 {
+        notes.push(format!("the file holds {frames} volumes ({shape}); loaded volume {}", opts.index));
+    }
+    let (slope, inter) = (h.scl_slope, h.scl_inter);
+    if slope.is_finite() && slope != 0.0 && (slope != 1.0 || (inter.is_finite() && inter != 0.0)) {
+        let inter = if inter.is_finite() { inter } else { 0.0 };
+        samples = Samples::F32(to_f32(samples).into_iter().map(|v| v * slope + inter).collect());
+        notes.push(format!("scaled by scl_slope {slope} and scl_inter {inter} into f32"));
+    }
+    let spacing = [1, 2, 3].map(|i| if i <= n { voxel_size(f64::from(h.pixdim[i])) } else { 1.0 });
+    Ok(Loaded {
+        volume: LoadedVolume { dims: Dims(nx, ny, nz), samples, spacing },
+        format: Format::Nifti,
+        notes,
+    })
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+
+    /// A NIfTI-1 header built field by field at the offsets of nifti1.h
+    /// (independently of the `nifti` crate), then `data`.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn file(
+        dims: &[i16],
+        datatype: i16,
+        bitpix: i16,
+        pixdim: [f32; 3],
+        slope_inter: (f32, f32),
+        magic: &[u8; 4],
+        big: bool,
+        data: &[u8],
+    ) -> Vec<u8> {
+        let mut h = vec![0u8; 352];
+        let mut put = |at: usize, b: &[u8]| h[at..at + b.len()].copy_from_slice(b);
+        let i16b = |v: i16| if big { v.to_be_bytes() } else { v.to_le_bytes() };
+        let i32b = |v: i32| if big { v.to_be_bytes() } else { v.to_le_bytes() };
+        let f32b = |v: f32| if big { v.to_be_bytes() } else { v.to_le_bytes() };
+        put(0, &i32b(348));
+        put(40, &i16b(dims.len() as i16));
+        for (i, &d) in dims.iter().enumerate() {
+            put(42 + 2 * i, &i16b(d));
+        }
+        put(70, &i16b(datatype));
+        put(72, &i16b(bitpix));
+        put(76, &f32b(1.0));
+        for (i, &p) in pixdim.iter().enumerate() {
+            put(80 + 4 * i, &f32b(p));
+        }
+        put(108, &f32b(352.0));
+        put(112, &f32b(slope_inter.0));
+        put(116, &f32b(slope_inter.1));
+        put(344, magic);
+        h.extend_from_slice(data);
+        h
+    }
+
+    fn le16(v: &[i16]) -> Vec<u8> {
+        v.iter().flat_map(|x| x.to_le_bytes()).collect()
+    }
+
+    fn err(bytes: &[u8]) -> String {
+        format!("{:#}", parse(bytes, &Options::default()).unwrap_err())
+    }
+
+    #[test]
+    fn little_endian_u8_with_spacing() {
+        let data: Vec<u8> = (0..24).collect();
+        let f = file(&[2, 3, 4], 2, 8, [0.5, 2.0, -3.0], (0.0, 0.0), b"n+1\0", false, &data);
+        let l = parse(&f, &Options::default()).unwrap();
+        assert_eq!(l.format, Format::Nifti);
+        assert_eq!(l.volume.dims, Dims(2, 3, 4));
+        assert_eq!(l.volume.spacing, [0.5, 2.0, 3.0]);
+        assert_eq!(l.volume.samples, Samples::U8(data));
+        assert!(l.notes.is_empty(), "{:?}", l.notes);
+    }
+
+    #[test]
+    fn big_endian_int16_and_int8() {
+        let v = [-300i16, 0, 7, i16::MAX];
+        let be: Vec<u8> = v.iter().flat_map(|x| x.to_be_bytes()).collect();
+        let f = file(&[2, 2], 4, 16, [1.0, 1.0, 0.0], (1.0, 0.0), b"n+1\0", true, &be);
+        let l = parse(&f, &Options::default()).unwrap();
+        assert_eq!(l.volume.dims, Dims(2, 2, 1));
+        assert_eq!(l.volume.spacing, [1.0, 1.0, 1.0]);
+        assert_eq!(l.volume.samples, Samples::I16(v.to_vec()));
+        let f = file(&[3, 1, 1], 256, 8, [1.0; 3], (0.0, 0.0), b"n+1\0", true, &[0x80, 0xff, 0x7f]);
+        assert_eq!(parse(&f, &Options::default()).unwrap().volume.samples, Samples::I16(vec![-128, -1, 127]));
+    }
+
+    #[test]
+    fn uint16_float64_and_scaling() {
+        let f = file(&[2, 1, 1], 512, 16, [1.0; 3], (0.0, 0.0), b"n+1\0", false, &[1, 0, 0xff, 0xff]);
+        assert_eq!(parse(&f, &Options::default()).unwrap().volume.samples, Samples::U16(vec![1, 65535]));
+        let d: Vec<u8> = [0.25f64, -1e300].iter().flat_map(|x| x.to_le_bytes()).collect();
+        let f = file(&[2, 1, 1], 64, 64, [1.0; 3], (0.0, 0.0), b"n+1\0", false, &d);
+        let l = parse(&f, &Options::default()).unwrap();
+        assert_eq!(l.volume.samples, Samples::F32(vec![0.25, f32::NEG_INFINITY]));
+        assert!(l.notes[0].contains("float64 samples are loaded as f32"), "{:?}", l.notes);
+        // int16 with slope 0.5, intercept -10: f32.
+        let f = file(&[3, 1, 1], 4, 16, [1.0; 3], (0.5, -10.0), b"n+1\0", false, &le16(&[0, 4, -6]));
+        let l = parse(&f, &Options::default()).unwrap();
+        assert_eq!(l.volume.samples, Samples::F32(vec![-10.0, -8.0, -13.0]));
+        assert!(l.notes.iter().any(|n| n.contains("scl_slope 0.5")), "{:?}", l.notes);
+        // Slope 1 with an intercept scales too; slope 0 or 1 alone does not.
+        let f = file(&[1, 1, 1], 4, 16, [1.0; 3], (1.0, 3.0), b"n+1\0", false, &le16(&[4]));
+        assert_eq!(parse(&f, &Options::default()).unwrap().volume.samples, Samples::F32(vec![7.0]));
+        let f = file(&[1, 1, 1], 4, 16, [1.0; 3], (0.0, 3.0), b"n+1\0", false, &le16(&[4]));
+        assert_eq!(parse(&f, &Options::default()).unwrap().volume.samples, Samples::I16(vec![4]));
+    }
+
+    #[test]
+    fn four_dimensions_pick_a_volume() {
+        let f = file(&[2, 1, 1, 3], 4, 16, [1.0; 3], (0.0, 0.0), b"n+1\0", false, &le16(&[1, 2, 3, 4, 5, 6]));
+        let l = parse(&f, &Options::default()).unwrap();
+        assert_eq!(l.volume.samples, Samples::I16(vec![1, 2]));
+        assert!(l.notes.iter().any(|n| n.contains("3 volumes")), "{:?}", l.notes);
+        let l = parse(&f, &Options { index: 2 }).unwrap();
+        assert_eq!(l.volume.samples, Samples::I16(vec![5, 6]));
+        let e = format!("{:#}", parse(&f, &Options { index: 3 }).unwrap_err());
+        assert!(e.contains("holds 3 volume(s) of 2x1x1; volume 3 was asked for"), "{e}");
+    }
+
+    #[test]
+    fn bad_files_are_clear_errors() {
+        let good = file(&[2, 2, 2], 4, 16, [1.0; 3], (0.0, 0.0), b"n+1\0", false, &le16(&[0; 8]));
+        assert!(err(&good[..200]).contains("truncated: a NIfTI-1 header is 348 bytes, the file has 200"));
+        let e = err(&good[..good.len() - 1]);
+        assert!(
+            e.contains(
+                "2x2x2 of int16 need 16 bytes of data from byte 352, but the file has 15 (truncated?)"
+            ),
+            "{e}"
+        );
+        let mut long = good.clone();
+        long.push(0);
+        assert!(err(&long).contains("do not match the file size"), "{}", err(&long));
+        let mut bad = good.clone();
+        bad[0] = 7;
+        assert!(err(&bad).contains("not a NIfTI-1 file: sizeof_hdr reads"), "{}", err(&bad));
+        let mut bad = good.clone();
+        bad[..4].copy_from_slice(&540i32.to_le_bytes());
+        assert!(err(&bad).contains("NIfTI-2"), "{}", err(&bad));
+        let mut bad = good.clone();
+        bad[344..348].copy_from_slice(b"\0\0\0\0");
+        assert!(err(&bad).contains("Analyze"), "{}", err(&bad));
+        let mut bad = good.clone();
+        bad[344..348].copy_from_slice(b"ni1\0");
+        assert!(err(&bad).contains("separate .img"), "{}", err(&bad));
+        let mut bad = good.clone();
+        bad[70..72].copy_from_slice(&32i16.to_le_bytes()); // complex64
+        assert!(err(&bad).contains("Complex64 (datatype 32) is not supported"), "{}", err(&bad));
+        let mut bad = good.clone();
+        bad[70..72].copy_from_slice(&3i16.to_le_bytes());
+        assert!(err(&bad).contains("datatype 3 is not a NIfTI-1 data type"), "{}", err(&bad));
+        let mut bad = good.clone();
+        bad[44..46].copy_from_slice(&0i16.to_le_bytes());
+        assert!(err(&bad).contains("dim[2] is 0"), "{}", err(&bad));
+        let mut bad = good.clone();
+        bad[44..46].copy_from_slice(&(-5i16).to_le_bytes());
+        assert!(err(&bad).contains("dim[2] is -5"), "{}", err(&bad));
+        let mut bad = good.clone();
+        bad[40..42].copy_from_slice(&0i16.to_le_bytes());
+        assert!(err(&bad).contains("dim[0] is 0"), "{}", err(&bad));
+        // dim[0] 9 reads as a byte-swapped header to the crate; sizeof_hdr says otherwise.
+        let mut bad = good.clone();
+        bad[40..42].copy_from_slice(&9i16.to_le_bytes());
+        assert!(err(&bad).contains("dim[0] is 9; it must be 1 to 7"), "{}", err(&bad));
+        let mut bad = good.clone();
+        bad[108..112].copy_from_slice(&f32::NAN.to_le_bytes());
+        assert!(err(&bad).contains("vox_offset NaN"), "{}", err(&bad));
+        let mut bad = good;
+        bad[108..112].copy_from_slice(&1e9f32.to_le_bytes());
+        assert!(err(&bad).contains("vox_offset 1000000000"), "{}", err(&bad));
+    }
+
+    #[test]
+    fn huge_extents_do_not_allocate() {
+        let f = file(
+            &[32767, 32767, 32767, 32767, 32767, 32767, 32767],
+            64,
+            64,
+            [1.0; 3],
+            (0.0, 0.0),
+            b"n+1\0",
+            false,
+            &[],
+        );
+        let e = err(&f);
+        assert!(e.contains("overflow") || e.contains("need"), "{e}");
+    }
+
+    #[test]
+    fn gzip_and_header_pairs_from_disk() {
+        use std::io::Write;
+        let dir = std::env::temp_dir().join(format!("isoscope-nifti-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let f = file(&[2, 1, 1], 2, 8, [1.0; 3], (0.0, 0.0), b"n+1\0", false, &[5, 6]);
+        let mut z = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+        z.write_all(&f).unwrap();
+        let gz = dir.join("a.nii.gz");
+        std::fs::write(&gz, z.finish().unwrap()).unwrap();
+        assert_eq!(read(&gz, &Options::default()).unwrap().volume.samples, Samples::U8(vec![5, 6]));
+        // A pair: the header (352 bytes, magic ni1, vox_offset 0) and the image.
+        let mut hdr = file(&[2, 1, 1], 2, 8, [1.0; 3], (0.0, 0.0), b"ni1\0", false, &[]);
+        hdr[108..112].copy_from_slice(&0f32.to_le_bytes());
+        std::fs::write(dir.join("b.hdr"), &hdr).unwrap();
+        let e = format!("{:#}", read(&dir.join("b.hdr"), &Options::default()).unwrap_err());
+        assert!(e.contains("b.img"), "{e}");
+        std::fs::write(dir.join("b.img"), [9u8, 8]).unwrap();
+        assert_eq!(
+            read(&dir.join("b.hdr"), &Options::default()).unwrap().volume.samples,
+            Samples::U8(vec![9, 8])
+        );
+        std::fs::write(dir.join("b.img"), [9u8]).unwrap();
+        let e = format!("{:#}", read(&dir.join("b.hdr"), &Options::default()).unwrap_err());
+        assert!(e.contains("truncated") && e.contains("b.img"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
