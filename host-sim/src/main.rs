@@ -12,7 +12,7 @@ use isoscope_sim::contour::{Job, contour_volume, work_units, write_csv};
 use isoscope_sim::phosphor::PhosphorConfig;
 use isoscope_sim::progress::Progress;
 use isoscope_sim::scene::{self, Order, Scene, SceneConfig, Surface, refresh_samples};
-use isoscope_sim::volume::{DemoSpec, Dims, Dtype, LoadedVolume, Samples};
+use isoscope_sim::volume::{DemoSpec, Dims, Dtype, Endian, LoadedVolume, Samples};
 use isoscope_sim::wav::{WavChannels, WavConfig, WavFormat, audio_beam, write_wav_file};
 use std::io::Write;
 use std::path::PathBuf;
@@ -209,9 +209,16 @@ struct Source {
     /// Volume extents NXxNYxNZ (a 2D grid has NZ = 1).
     #[arg(long, requires = "input")]
     dims: Option<Dims>,
-    /// Sample type of the raw file: u8, u16, i16 or f32 (little-endian).
+    /// Sample type of the raw file: u8, u16, i16 or f32.
     #[arg(long, requires = "input")]
     dtype: Option<Dtype>,
+    /// Byte order of the raw file: little (default) or big.
+    #[arg(long, requires = "input")]
+    endian: Option<Endian>,
+    /// Which volume of a file that holds several (a NIfTI time point, a cube
+    /// orbital, a VTK array), from 0.
+    #[arg(long = "volume", value_name = "N", default_value_t = 0, requires = "input")]
+    volume_index: usize,
     /// A built-in volume instead of a file: hydrogen:N (the paper's Figure 1,
     /// 3d_xy orbital), gyroid:N, sphere:N or torus:N.
     #[arg(long, value_name = "NAME:N")]
@@ -284,13 +291,25 @@ fn load(source: &Source) -> Result<(LoadedVolume, Option<DemoSpec>)> {
     match (&source.input, source.demo) {
         (Some(path), None) => {
             if source.dims.is_none() && source.dtype.is_none() {
-                if let Some(v) = LoadedVolume::read_known(path)? {
+                let known = if path.extension().is_some_and(|e| e == "den") {
+                    LoadedVolume::read_known(path)?
+                } else {
+                    let opts = isoscope_sim::formats::Options { index: source.volume_index };
+                    isoscope_sim::formats::read(path, &opts)?.map(|l| {
+                        for n in &l.notes {
+                            eprintln!("isoscope-sim: note: {}: {n}", path.display());
+                        }
+                        l.volume
+                    })
+                };
+                if let Some(v) = known {
                     return Ok((v, None));
                 }
             }
-            let dims = source.dims.context("a volume file needs --dims NXxNYxNZ")?;
-            let dtype = source.dtype.context("a volume file needs --dtype u8|u16|i16|f32")?;
-            Ok((LoadedVolume::read_raw(path, dims, dtype)?, None))
+            let dims = source.dims.context("a raw volume file needs --dims NXxNYxNZ (and --dtype)")?;
+            let dtype = source.dtype.context("a raw volume file needs --dtype u8|u16|i16|f32")?;
+            let endian = source.endian.unwrap_or_default();
+            Ok((LoadedVolume::read_raw_endian(path, dims, dtype, endian)?, None))
         }
         (None, Some(spec)) => Ok((LoadedVolume::demo(spec)?, Some(spec))),
         _ => bail!("give a volume file (with --dims and --dtype) or --demo NAME:N"),
@@ -321,6 +340,8 @@ fn contour_svg(args: &ContourArgs) -> Result<()> {
             input: args.source.input.clone(),
             dims: args.source.dims,
             dtype: args.source.dtype,
+            endian: args.source.endian,
+            volume_index: args.source.volume_index,
             demo: args.source.demo,
         },
         levels: args.levels.clone(),

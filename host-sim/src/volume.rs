@@ -41,6 +41,27 @@ impl std::str::FromStr for Dtype {
     }
 }
 
+/// Byte order of a raw volume file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum Endian {
+    /// Least significant byte first (x86, ARM).
+    #[default]
+    Little,
+    /// Most significant byte first.
+    Big,
+}
+
+impl std::str::FromStr for Endian {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "little" | "le" => Ok(Endian::Little),
+            "big" | "be" => Ok(Endian::Big),
+            _ => Err(format!("unknown byte order `{s}` (expected little or big)")),
+        }
+    }
+}
+
 /// Volume extents parsed from `NXxNYxNZ`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct Dims(pub usize, pub usize, pub usize);
@@ -146,6 +167,18 @@ impl LoadedVolume {
 
     /// Decode raw little-endian samples.
     pub fn from_bytes(bytes: &[u8], dims: Dims, dtype: Dtype) -> Result<Self> {
+        Self::from_bytes_endian(bytes, dims, dtype, Endian::Little)
+    }
+
+    /// Decode raw samples in the given byte order.
+    pub fn from_bytes_endian(bytes: &[u8], dims: Dims, dtype: Dtype, endian: Endian) -> Result<Self> {
+        if endian == Endian::Big && dtype.size() > 1 {
+            let mut swapped = bytes.to_vec();
+            for c in swapped.chunks_exact_mut(dtype.size()) {
+                c.reverse();
+            }
+            return Self::from_bytes_endian(&swapped, dims, dtype, Endian::Little);
+        }
         let count = dims.count().context("the volume extents overflow")?;
         let expected = count.checked_mul(dtype.size()).context("the volume extents overflow")?;
         if bytes.len() != expected {
@@ -228,6 +261,13 @@ impl LoadedVolume {
             }
             _ => Ok(crate::formats::read(path, &crate::formats::Options::default())?.map(|l| l.volume)),
         }
+    }
+
+    /// Read a raw volume file in the given byte order.
+    pub fn read_raw_endian(path: &Path, dims: Dims, dtype: Dtype, endian: Endian) -> Result<Self> {
+        let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+        Self::from_bytes_endian(&bytes, dims, dtype, endian)
+            .with_context(|| format!("cannot load {}", path.display()))
     }
 
     /// Read a raw little-endian volume file.

@@ -702,3 +702,27 @@ fn wav_and_animation() {
     assert!(!out.status.success());
     assert!(text(&out.stderr).starts_with("isoscope-sim: error: "));
 }
+
+/// `--endian big` reads a big-endian raw file like its little-endian twin.
+#[test]
+fn big_endian_raw_files() {
+    let dir = TempDir::new("endian");
+    let vals: Vec<i16> = vec![150, 40, 30, 60, -5, 7, 900, -300];
+    let le: Vec<u8> = vals.iter().flat_map(|v| v.to_le_bytes()).collect();
+    let be: Vec<u8> = vals.iter().flat_map(|v| v.to_be_bytes()).collect();
+    let (pl, pb) = (dir.file("le.raw", &le), dir.file("be.raw", &be));
+    let csv = |p: &str, extra: &[&str]| {
+        let mut a = vec!["contour", p, "--dims", "2x2x2", "--dtype", "i16", "--level", "45"];
+        a.extend_from_slice(extra);
+        let out = run(&a);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        text(&out.stdout)
+    };
+    let little = csv(&pl, &[]);
+    assert!(little.lines().count() > 1);
+    assert_eq!(csv(&pb, &["--endian", "big"]), little);
+    assert_ne!(csv(&pb, &[]), little);
+    let out =
+        run(&["contour", &pb, "--dims", "2x2x2", "--dtype", "i16", "--level", "1", "--endian", "middle"]);
+    assert!(!out.status.success());
+}
