@@ -156,9 +156,11 @@ struct ViewArgs {
     /// DAC resolution in bits.
     #[arg(long, default_value_t = 12)]
     bits: u8,
-    /// Contour every N-th slice of each plane.
-    #[arg(long, default_value_t = 1, value_name = "N")]
-    every: usize,
+    /// Contour every N-th slice of each plane (default 1; `render` picks
+    /// one that keeps a large volume from blurring into a blob: the longest
+    /// axis / 32, rounded up).
+    #[arg(long, value_name = "N")]
+    every: Option<usize>,
 }
 
 #[derive(Args, Debug)]
@@ -349,7 +351,7 @@ fn contour_svg(args: &ContourArgs) -> Result<()> {
         view: ViewArgs { ..args.view },
         beam: BeamArgs { lit_step: BeamConfig::default().lit_step, rate: 1e6, order: OrderArg::Optimized },
     };
-    let scene = build_scene(&scene_args)?;
+    let scene = build_scene(&scene_args, false)?;
     let bits = args.view.bits;
     match &args.output {
         Some(path) => {
@@ -392,9 +394,9 @@ fn contour(args: &ContourArgs) -> Result<()> {
         traversal,
         threads,
         keep: matches!(args.format, Format::Csv),
-        every: args.view.every,
+        every: args.view.every.unwrap_or(1),
     };
-    if args.view.every == 0 {
+    if args.view.every == Some(0) {
         bail!("--every must be at least 1");
     }
     let Dims(nx, ny, nz) = vol.dims;
@@ -454,13 +456,25 @@ fn contour(args: &ContourArgs) -> Result<()> {
     Ok(())
 }
 
-fn levels_for(given: &[f32], demo: Option<DemoSpec>) -> Result<Vec<f32>> {
+/// The levels to draw: those given, else the demo's own, else the first
+/// level `info` suggests for the file (Otsu's threshold), with a note.
+fn levels_for(given: &[f32], demo: Option<DemoSpec>, vol: &LoadedVolume) -> Result<Vec<f32>> {
     if !given.is_empty() {
         return Ok(given.to_vec());
     }
-    match demo {
-        Some(d) => Ok(vec![d.demo.default_level()]),
-        None => bail!("give at least one --level for a volume file"),
+    if let Some(d) = demo {
+        return Ok(vec![d.demo.default_level()]);
+    }
+    match isoscope_sim::info::summarize(vol, 64).suggested.first() {
+        Some(&l) => {
+            eprintln!(
+                "isoscope-sim: note: no --level given; drawing level {l} (Otsu's threshold, see `info`)"
+            );
+            Ok(vec![l])
+        }
+        None => {
+            bail!("give at least one --level: the volume's values suggest none (it is constant or empty)")
+        }
     }
 }
 
@@ -468,7 +482,7 @@ fn render(args: &RenderArgs) -> Result<()> {
     if let Some(path) = &args.animate {
         return render_animation(args, path);
     }
-    let scene = build_scene(&args.scene)?;
+    let scene = build_scene(&args.scene, true)?;
     let mut cfg = PhosphorConfig::with_size(args.size, args.size);
     cfg.bits = args.scene.view.bits;
     cfg.show_blanked = args.show_blanked;
@@ -502,6 +516,7 @@ fn render_animation(args: &RenderArgs, path: &std::path::Path) -> Result<()> {
         &args.scene.view,
         args.scene.beam.order,
         scene_beam(&args.scene),
+        true,
     )?;
     let mut picture = PhosphorConfig::with_size(args.size, args.size);
     picture.bits = args.scene.view.bits;
@@ -536,12 +551,22 @@ fn prepare(
     v: &ViewArgs,
     order: OrderArg,
     beam: BeamConfig,
+    auto_every: bool,
 ) -> Result<(Surface, SceneConfig)> {
     let (vol, demo) = load(source)?;
-    let levels = levels_for(given_levels, demo)?;
+    let levels = levels_for(given_levels, demo, &vol)?;
     let planes = planes(axes)?;
-    if v.every == 0 {
-        bail!("--every must be at least 1");
+    let every = match v.every {
+        Some(0) => bail!("--every must be at least 1"),
+        Some(n) => n,
+        None if auto_every => {
+            let Dims(nx, ny, nz) = vol.dims;
+            nx.max(ny).max(nz).div_ceil(32).max(1)
+        }
+        None => 1,
+    };
+    if every > 1 && v.every.is_none() {
+        eprintln!("isoscope-sim: note: drawing every {every}th slice (--every to choose)");
     }
     let view = View {
         yaw: v.yaw,
@@ -558,7 +583,7 @@ fn prepare(
     let cfg = SceneConfig {
         planes,
         levels,
-        every: v.every,
+        every,
         view,
         beam,
         order: match order {
@@ -581,9 +606,17 @@ fn prepare(
     Ok((surface, cfg))
 }
 
-fn build_scene(args: &StatsArgs) -> Result<Scene> {
-    let (surface, cfg) =
-        prepare(&args.source, &args.levels, &args.axes, &args.view, args.beam.order, scene_beam(args))?;
+/// One frame; `auto_every` lets a large volume default to every n-th slice.
+fn build_scene(args: &StatsArgs, auto_every: bool) -> Result<Scene> {
+    let (surface, cfg) = prepare(
+        &args.source,
+        &args.levels,
+        &args.axes,
+        &args.view,
+        args.beam.order,
+        scene_beam(args),
+        auto_every,
+    )?;
     let mut scene = surface.scene(&cfg)?;
     // The contouring happened in `prepare`: count it in the pipeline.
     scene.seconds[0] += surface.seconds;
@@ -596,7 +629,7 @@ fn wav(args: &WavArgs) -> Result<()> {
         beam.lit_step = step;
     }
     let (surface, cfg) =
-        prepare(&args.source, &args.levels, &args.axes, &args.view, OrderArg::Optimized, beam)?;
+        prepare(&args.source, &args.levels, &args.axes, &args.view, OrderArg::Optimized, beam, true)?;
     let scene = surface.scene(&cfg)?;
     let frame = refresh_samples(&scene.list, &beam);
     let wcfg = WavConfig {
@@ -626,7 +659,7 @@ fn wav(args: &WavArgs) -> Result<()> {
 }
 
 fn stats(args: &StatsArgs) -> Result<()> {
-    let scene = build_scene(args)?;
+    let scene = build_scene(args, false)?;
     print!("{}", scene.report(args.beam.rate));
     Ok(())
 }
