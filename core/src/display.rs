@@ -179,6 +179,17 @@ impl<const N: usize> Default for Scratch<N> {
     }
 }
 
+/// The parts of a scratch store, as slices.
+struct Parts<'s> {
+    a: &'s mut [u32],
+    b: &'s mut [u32],
+    c: &'s mut [u32],
+    d: &'s mut [u32],
+    edges: &'s mut [u64],
+    back: &'s mut [ScreenPoint],
+    back_flags: &'s mut [u8],
+}
+
 impl<U, W, P, F> ScratchStore<U, W, P, F>
 where
     U: AsMut<[u32]>,
@@ -186,6 +197,23 @@ where
     P: AsMut<[ScreenPoint]>,
     F: AsMut<[u8]>,
 {
+    /// Every part as a slice, or `None` when one holds fewer than `cap`
+    /// entries (a scratch too small for the list).
+    fn parts(&mut self, cap: usize) -> Option<Parts<'_>> {
+        let p = Parts {
+            a: self.a.as_mut(),
+            b: self.b.as_mut(),
+            c: self.c.as_mut(),
+            d: self.d.as_mut(),
+            edges: self.edges.as_mut(),
+            back: self.back.as_mut(),
+            back_flags: self.back_flags.as_mut(),
+        };
+        let lens =
+            [p.a.len(), p.b.len(), p.c.len(), p.d.len(), p.edges.len(), p.back.len(), p.back_flags.len()];
+        lens.iter().all(|&l| l >= cap).then_some(p)
+    }
+
     /// Scratch over caller storage (each part at least the list's capacity).
     pub fn with_storage(a: U, b: U, c: U, d: U, edges: W, back: P, back_flags: F) -> Self {
         Self { a, b, c, d, edges, back, back_flags }
@@ -432,24 +460,11 @@ where
             polylines: self.polyline_count(),
             ..Default::default()
         };
-        let ScratchStore { a, b, c, d, edges, back, back_flags } = scratch;
-        let (vid, order, deg, adj, edges, back, back_flags) = (
-            a.as_mut(),
-            b.as_mut(),
-            c.as_mut(),
-            d.as_mut(),
-            edges.as_mut(),
-            back.as_mut(),
-            back_flags.as_mut(),
-        );
-        let cap = self.capacity();
-        if [vid.len(), order.len(), deg.len(), adj.len(), edges.len(), back.len(), back_flags.len()]
-            .iter()
-            .any(|&l| l < cap)
-            || n == 0
-        {
+        let Some(Parts { a: vid, b: order, c: deg, d: adj, edges, back, back_flags }) =
+            scratch.parts(self.capacity()).filter(|_| n > 0)
+        else {
             return stats;
-        }
+        };
         let points = self.points.as_ref();
         let flags = self.flags.as_ref();
 
@@ -1842,25 +1857,12 @@ where
             cycle_nearest: cycle_before,
             cycle_after: cycle_before,
         };
-        let ScratchStore { a, b, c, d, edges, back, back_flags } = scratch;
-        let (starts, pos, items, first, seq, at, idle) = (
-            a.as_mut(),
-            b.as_mut(),
-            c.as_mut(),
-            d.as_mut(),
-            edges.as_mut(),
-            back.as_mut(),
-            back_flags.as_mut(),
-        );
-        let cap = self.capacity();
         let n = self.len;
-        if [starts.len(), pos.len(), items.len(), first.len(), seq.len(), at.len(), idle.len()]
-            .iter()
-            .any(|&l| l < cap)
-            || n == 0
-        {
+        let Some(Parts { a: starts, b: pos, c: items, d: first, edges: seq, back: at, back_flags: idle }) =
+            scratch.parts(self.capacity()).filter(|_| n > 0)
+        else {
             return stats;
-        }
+        };
         let points = self.points.as_ref().get(..n).unwrap_or(&[]);
         let flags = self.flags.as_ref().get(..n).unwrap_or(&[]);
         let mut count = 0usize;
