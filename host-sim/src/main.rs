@@ -102,13 +102,7 @@ struct RenderArgs {
 #[derive(Args, Debug)]
 struct WavArgs {
     #[command(flatten)]
-    source: Source,
-    /// Contour level (repeatable). Default for a demo: its characteristic level.
-    #[arg(long = "level", value_name = "L", allow_hyphen_values = true, value_parser = parse_level)]
-    levels: Vec<f32>,
-    /// Slicing planes, comma-separated: xy, xz, yz.
-    #[arg(long, default_value = "xy,xz,yz", value_delimiter = ',')]
-    axes: Vec<String>,
+    input: InputArgs,
     #[command(flatten)]
     view: ViewArgs,
     /// Output WAV file.
@@ -133,6 +127,19 @@ struct WavArgs {
     /// 32-bit float samples instead of 16-bit PCM.
     #[arg(long)]
     float: bool,
+}
+
+/// What to contour: a volume, its levels and its slicing planes.
+#[derive(Args, Debug, Clone)]
+struct InputArgs {
+    #[command(flatten)]
+    source: Source,
+    /// Contour level (repeatable). Default for a demo: its characteristic level.
+    #[arg(long = "level", value_name = "L", allow_hyphen_values = true, value_parser = parse_level)]
+    levels: Vec<f32>,
+    /// Slicing planes, comma-separated: xy, xz, yz.
+    #[arg(long, default_value = "xy,xz,yz", value_delimiter = ',')]
+    axes: Vec<String>,
 }
 
 #[derive(Args, Debug, Clone, Copy)]
@@ -189,13 +196,7 @@ enum OrderArg {
 #[derive(Args, Debug)]
 struct StatsArgs {
     #[command(flatten)]
-    source: Source,
-    /// Contour level (repeatable). Default for a demo: its characteristic level.
-    #[arg(long = "level", value_name = "L", allow_hyphen_values = true, value_parser = parse_level)]
-    levels: Vec<f32>,
-    /// Slicing planes, comma-separated: xy, xz, yz.
-    #[arg(long, default_value = "xy,xz,yz", value_delimiter = ',')]
-    axes: Vec<String>,
+    input: InputArgs,
     #[command(flatten)]
     view: ViewArgs,
     #[command(flatten)]
@@ -249,13 +250,7 @@ enum TraversalArg {
 #[derive(Args, Debug)]
 struct ContourArgs {
     #[command(flatten)]
-    source: Source,
-    /// Contour level (repeatable). Default for a demo: its characteristic level.
-    #[arg(long = "level", value_name = "L", allow_hyphen_values = true, value_parser = parse_level)]
-    levels: Vec<f32>,
-    /// Slicing planes, comma-separated: xy, xz, yz.
-    #[arg(long, default_value = "xy,xz,yz", value_delimiter = ',')]
-    axes: Vec<String>,
+    input: InputArgs,
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
@@ -338,16 +333,7 @@ fn planes(axes: &[String]) -> Result<Vec<Plane>> {
 
 fn contour_svg(args: &ContourArgs) -> Result<()> {
     let scene_args = StatsArgs {
-        source: Source {
-            input: args.source.input.clone(),
-            dims: args.source.dims,
-            dtype: args.source.dtype,
-            endian: args.source.endian,
-            volume_index: args.source.volume_index,
-            demo: args.source.demo,
-        },
-        levels: args.levels.clone(),
-        axes: args.axes.clone(),
+        input: args.input.clone(),
         view: ViewArgs { ..args.view },
         beam: BeamArgs { lit_step: BeamConfig::default().lit_step, rate: 1e6, order: OrderArg::Optimized },
     };
@@ -369,16 +355,16 @@ fn contour(args: &ContourArgs) -> Result<()> {
     if let Format::Svg = args.format {
         return contour_svg(args);
     }
-    let (vol, demo) = load(&args.source)?;
-    let levels = if args.levels.is_empty() {
+    let (vol, demo) = load(&args.input.source)?;
+    let levels = if args.input.levels.is_empty() {
         match demo {
             Some(d) => vec![d.demo.default_level()],
             None => bail!("give at least one --level for a volume file"),
         }
     } else {
-        args.levels.clone()
+        args.input.levels.clone()
     };
-    let planes = planes(&args.axes)?;
+    let planes = planes(&args.input.axes)?;
     let threads = match args.threads {
         Some(0) => bail!("--threads must be at least 1"),
         Some(n) => n,
@@ -509,15 +495,8 @@ fn render(args: &RenderArgs) -> Result<()> {
 fn render_animation(args: &RenderArgs, path: &std::path::Path) -> Result<()> {
     let format = AnimFormat::from_path(path)
         .with_context(|| format!("{}: an animation is a .gif or an (animated) .png", path.display()))?;
-    let (surface, cfg) = prepare(
-        &args.scene.source,
-        &args.scene.levels,
-        &args.scene.axes,
-        &args.scene.view,
-        args.scene.beam.order,
-        scene_beam(&args.scene),
-        true,
-    )?;
+    let (surface, cfg) =
+        prepare(&args.scene.input, &args.scene.view, args.scene.beam.order, scene_beam(&args.scene), true)?;
     let mut picture = PhosphorConfig::with_size(args.size, args.size);
     picture.bits = args.scene.view.bits;
     picture.show_blanked = args.show_blanked;
@@ -545,17 +524,15 @@ fn scene_beam(args: &StatsArgs) -> BeamConfig {
 /// Load the volume, contour it once (keeping 3D geometry) and make the
 /// scene configuration: everything a frame, an animation or a WAV needs.
 fn prepare(
-    source: &Source,
-    given_levels: &[f32],
-    axes: &[String],
+    input: &InputArgs,
     v: &ViewArgs,
     order: OrderArg,
     beam: BeamConfig,
     auto_every: bool,
 ) -> Result<(Surface, SceneConfig)> {
-    let (vol, demo) = load(source)?;
-    let levels = levels_for(given_levels, demo, &vol)?;
-    let planes = planes(axes)?;
+    let (vol, demo) = load(&input.source)?;
+    let levels = levels_for(&input.levels, demo, &vol)?;
+    let planes = planes(&input.axes)?;
     let every = match v.every {
         Some(0) => bail!("--every must be at least 1"),
         Some(n) => n,
@@ -608,15 +585,7 @@ fn prepare(
 
 /// One frame; `auto_every` lets a large volume default to every n-th slice.
 fn build_scene(args: &StatsArgs, auto_every: bool) -> Result<Scene> {
-    let (surface, cfg) = prepare(
-        &args.source,
-        &args.levels,
-        &args.axes,
-        &args.view,
-        args.beam.order,
-        scene_beam(args),
-        auto_every,
-    )?;
+    let (surface, cfg) = prepare(&args.input, &args.view, args.beam.order, scene_beam(args), auto_every)?;
     let mut scene = surface.scene(&cfg)?;
     // The contouring happened in `prepare`: count it in the pipeline.
     scene.seconds[0] += surface.seconds;
@@ -628,8 +597,7 @@ fn wav(args: &WavArgs) -> Result<()> {
     if let Some(step) = args.lit_step {
         beam.lit_step = step;
     }
-    let (surface, cfg) =
-        prepare(&args.source, &args.levels, &args.axes, &args.view, OrderArg::Optimized, beam, true)?;
+    let (surface, cfg) = prepare(&args.input, &args.view, OrderArg::Optimized, beam, true)?;
     let scene = surface.scene(&cfg)?;
     let frame = refresh_samples(&scene.list, &beam);
     let wcfg = WavConfig {
