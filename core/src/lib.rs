@@ -15,7 +15,17 @@
 //! - [`contour`]: every subgrid of a grid, one or many levels.
 //! - [`surface`]: every slice of a volume along any planes.
 //! - [`command`]: `MoveTo / LineTo / Point` and the sink trait.
-//! - [`demo`]: built-in volumes (hydrogen 3d_xy orbital, gyroid).
+//! - [`demo`]: built-in volumes (hydrogen 3d_xy orbital, gyroid, sphere,
+//!   torus).
+//! - [`view`]: 3D view, projection and auto-fit to the DAC range.
+//! - [`screen`]: points in DAC units.
+//! - [`display`]: the display list: cull, stitch, merge, order.
+//! - [`beam`]: the beam scheduler (display list to DAC samples) and frame
+//!   statistics.
+//! - [`dac`]: the `Dac` trait; [`mock_dac`]: a heap-free mock with ASCII
+//!   art; `spi_dac` (feature `embedded-hal`): the MCP4922.
+//! - [`wire`]: the UART frame protocol shared by host and device (postcard,
+//!   CRC-32, COBS; see `docs/wire-format.md`).
 //!
 //! No `alloc`, no `unsafe`, no panics on any input; all float maths goes
 //! through `libm` so the host and the MCU compute the same numbers.
@@ -79,3 +89,4 @@ mod sweep;
 pub mod trace;
 pub mod tree;
 pub mod view;
+pub mod wire;
