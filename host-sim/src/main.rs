@@ -288,18 +288,11 @@ fn load(source: &Source) -> Result<(LoadedVolume, Option<DemoSpec>)> {
     match (&source.input, source.demo) {
         (Some(path), None) => {
             if source.dims.is_none() && source.dtype.is_none() {
-                let known = if path.extension().is_some_and(|e| e == "den") {
-                    LoadedVolume::read_known(path)?
-                } else {
-                    let opts = isoscope_sim::formats::Options { index: source.volume_index };
-                    isoscope_sim::formats::read(path, &opts)?.map(|l| {
-                        for n in &l.notes {
-                            eprintln!("isoscope-sim: note: {}: {n}", path.display());
-                        }
-                        l.volume
-                    })
-                };
-                if let Some(v) = known {
+                let opts = isoscope_sim::formats::Options { index: source.volume_index };
+                if let Some((v, notes)) = LoadedVolume::read_known_with(path, &opts)? {
+                    for n in &notes {
+                        eprintln!("isoscope-sim: note: {}: {n}", path.display());
+                    }
                     return Ok((v, None));
                 }
             }
@@ -356,14 +349,8 @@ fn contour(args: &ContourArgs) -> Result<()> {
         return contour_svg(args);
     }
     let (vol, demo) = load(&args.input.source)?;
-    let levels = if args.input.levels.is_empty() {
-        match demo {
-            Some(d) => vec![d.demo.default_level()],
-            None => bail!("give at least one --level for a volume file"),
-        }
-    } else {
-        args.input.levels.clone()
-    };
+    // An export says its levels: no suggested level for a file.
+    let levels = levels_for(&args.input.levels, demo, None)?;
     let planes = planes(&args.input.axes)?;
     let threads = match args.threads {
         Some(0) => bail!("--threads must be at least 1"),
@@ -442,15 +429,17 @@ fn contour(args: &ContourArgs) -> Result<()> {
     Ok(())
 }
 
-/// The levels to draw: those given, else the demo's own, else the first
-/// level `info` suggests for the file (Otsu's threshold), with a note.
-fn levels_for(given: &[f32], demo: Option<DemoSpec>, vol: &LoadedVolume) -> Result<Vec<f32>> {
+/// The levels to draw: those given, else the demo's own, else (when
+/// `suggest` gives the volume) the first level `info` suggests for it
+/// (Otsu's threshold), with a note.
+fn levels_for(given: &[f32], demo: Option<DemoSpec>, suggest: Option<&LoadedVolume>) -> Result<Vec<f32>> {
     if !given.is_empty() {
         return Ok(given.to_vec());
     }
     if let Some(d) = demo {
         return Ok(vec![d.demo.default_level()]);
     }
+    let Some(vol) = suggest else { bail!("give at least one --level for a volume file") };
     match isoscope_sim::info::summarize(vol, 64).suggested.first() {
         Some(&l) => {
             eprintln!(
@@ -531,7 +520,7 @@ fn prepare(
     auto_every: bool,
 ) -> Result<(Surface, SceneConfig)> {
     let (vol, demo) = load(&input.source)?;
-    let levels = levels_for(&input.levels, demo, &vol)?;
+    let levels = levels_for(&input.levels, demo, Some(&vol))?;
     let planes = planes(&input.axes)?;
     let every = match v.every {
         Some(0) => bail!("--every must be at least 1"),

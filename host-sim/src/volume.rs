@@ -254,12 +254,23 @@ impl LoadedVolume {
     /// bytes ([`crate::formats::Format::sniff`]); `Ok(None)` for any other
     /// file (a raw one). A file holding several volumes gives its first.
     pub fn read_known(path: &Path) -> Result<Option<Self>> {
+        Ok(Self::read_known_with(path, &crate::formats::Options::default())?.map(|(v, _)| v))
+    }
+
+    /// As [`LoadedVolume::read_known`], choosing among several volumes with
+    /// `opts`, and with the reader's remarks for the user (conversions,
+    /// units, which volume was taken).
+    pub fn read_known_with(
+        path: &Path,
+        opts: &crate::formats::Options,
+    ) -> Result<Option<(Self, Vec<String>)>> {
         match path.extension().and_then(|e| e.to_str()) {
             Some("den") => {
                 let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-                Self::from_den(&bytes).with_context(|| format!("cannot load {}", path.display())).map(Some)
+                let v = Self::from_den(&bytes).with_context(|| format!("cannot load {}", path.display()))?;
+                Ok(Some((v, Vec::new())))
             }
-            _ => Ok(crate::formats::read(path, &crate::formats::Options::default())?.map(|l| l.volume)),
+            _ => Ok(crate::formats::read(path, opts)?.map(|l| (l.volume, l.notes))),
         }
     }
 
