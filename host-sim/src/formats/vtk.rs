@@ -131,6 +131,53 @@ enum Section {
     Cell(usize),
 }
 
+/// One data array met in the file.
+struct Array {
+    name: String,
+    comps: usize,
+    ty: Ty,
+    total: usize,
+    what: String,
+}
+
+/// The point arrays that could be the volume, the other arrays (for the
+/// error message), and the one chosen (the `index`-th candidate).
+struct Arrays {
+    index: usize,
+    candidates: Vec<String>,
+    others: Vec<String>,
+    found: Option<(String, Elem, Samples)>,
+}
+
+impl Arrays {
+    /// Take `a` if it is the chosen candidate (`usable` gives its element
+    /// type and point count when it is a one-component point array),
+    /// otherwise skip its data.
+    fn offer(
+        &mut self,
+        r: &mut Reader<'_>,
+        section: Section,
+        a: Array,
+        usable: Option<(Elem, usize)>,
+    ) -> Result<()> {
+        match usable {
+            Some((e, n)) => {
+                if self.candidates.len() == self.index {
+                    self.found = Some((a.name.clone(), e, r.values(n, e, &a.what)?));
+                } else {
+                    r.skip(a.total, a.ty, &a.what)?;
+                }
+                self.candidates.push(a.name);
+            }
+            None => {
+                self.others.push(describe(section, &a.name, a.comps));
+                r.skip(a.total, a.ty, &a.what)?;
+            }
+        }
+        Ok(())
+    }
+}
+
 struct Reader<'a> {
     c: Cursor<'a>,
     binary: bool,
@@ -228,11 +275,9 @@ pub fn parse(bytes: &[u8], opts: &Options) -> Result<Loaded> {
     let mut dims: Option<[usize; 3]> = None;
     let mut spacing = [1.0f32; 3];
     let mut section = Section::None;
-    let mut candidates: Vec<String> = Vec::new();
-    let mut others: Vec<String> = Vec::new();
-    let mut found: Option<(String, Elem, Samples)> = None;
+    let mut seen = Arrays { index: opts.index, candidates: Vec::new(), others: Vec::new(), found: None };
     let points = |dims: Option<[usize; 3]>| dims.map(|d| d[0] * d[1] * d[2]);
-    while found.is_none() {
+    while seen.found.is_none() {
         let Some(line) = r.c.keyword_line() else { break };
         let at = r.c.line_no() - 1;
         let w = words(&line, 1, "a keyword")?;
@@ -306,26 +351,17 @@ pub fn parse(bytes: &[u8], opts: &Options) -> Result<Loaded> {
                     if section == Section::None {
                         bail!("line {at}: SCALARS outside POINT_DATA or CELL_DATA");
                     }
-                    match (section, ty) {
-                        (Section::Point(_), Ty::Elem(e)) if comps == 1 => {
-                            if candidates.len() == opts.index {
-                                found = Some((name.clone(), e, r.values(n_here, e, &what)?));
-                            } else {
-                                r.skip(total, ty, &what)?;
-                            }
-                            candidates.push(name);
-                        }
-                        _ => {
-                            others.push(describe(section, &name, comps));
-                            r.skip(total, ty, &what)?;
-                        }
-                    }
+                    let usable = match (section, ty) {
+                        (Section::Point(_), Ty::Elem(e)) if comps == 1 => Some((e, n_here)),
+                        _ => None,
+                    };
+                    seen.offer(&mut r, section, Array { name, comps, ty, total, what }, usable)?;
                 }
                 "FIELD" => {
                     let w = words(&line, 3, "FIELD NAME ARRAYS")?;
                     let arrays = count(w[2], &line)?;
                     let mut i = 0;
-                    while i < arrays && found.is_none() {
+                    while i < arrays && seen.found.is_none() {
                         let l =
                             r.c.keyword_line()
                                 .with_context(|| format!("the file is truncated in FIELD `{}`", w[1]))?;
@@ -339,20 +375,11 @@ pub fn parse(bytes: &[u8], opts: &Options) -> Result<Loaded> {
                         let name = unescape(a[0]);
                         let what = format!("FIELD array `{name}`");
                         let total = comps.checked_mul(tuples).context("the extents overflow")?;
-                        match (section, ty) {
-                            (Section::Point(n), Ty::Elem(e)) if comps == 1 && tuples == n => {
-                                if candidates.len() == opts.index {
-                                    found = Some((name.clone(), e, r.values(n, e, &what)?));
-                                } else {
-                                    r.skip(total, ty, &what)?;
-                                }
-                                candidates.push(name);
-                            }
-                            _ => {
-                                others.push(describe(section, &name, comps));
-                                r.skip(total, ty, &what)?;
-                            }
-                        }
+                        let usable = match (section, ty) {
+                            (Section::Point(n), Ty::Elem(e)) if comps == 1 && tuples == n => Some((e, n)),
+                            _ => None,
+                        };
+                        seen.offer(&mut r, section, Array { name, comps, ty, total, what }, usable)?;
                         i += 1;
                     }
                 }
@@ -395,7 +422,7 @@ pub fn parse(bytes: &[u8], opts: &Options) -> Result<Loaded> {
                         }
                     };
                     let ty = data_type(ty_word).with_context(|| format!("line {at}"))?;
-                    others.push(describe(section, &unescape(w.get(1).copied().unwrap_or("")), per));
+                    seen.others.push(describe(section, &unescape(w.get(1).copied().unwrap_or("")), per));
                     let n = n_here.checked_mul(per).context("the extents overflow")?;
                     r.skip(n, ty, &format!("{k} (line {at})"))?;
                 }
@@ -408,6 +435,7 @@ pub fn parse(bytes: &[u8], opts: &Options) -> Result<Loaded> {
         }
     }
     let d = dims.context("the file has no DIMENSIONS line")?;
+    let Arrays { candidates, others, found, .. } = seen;
     let Some((name, elem, samples)) = found else {
         if candidates.is_empty() {
             bail!(
