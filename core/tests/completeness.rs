@@ -7,14 +7,15 @@
 //! equal-valued edge at the level is drawn once; an isolated point at the
 //! level is a DRAWPOINT.
 
-use isoscope_core::command::{Command, CommandSink, Point2};
+mod common;
+use common::Log;
+use isoscope_core::command::{Command, Point2};
 use isoscope_core::contour::contour_grid;
 use isoscope_core::grid::Grid2;
 use isoscope_core::subgrid::{Edge, Node, Subgrid};
 use isoscope_core::trace::{Conn, Crossing, Traversal, visit};
 use isoscope_core::tree::Template;
 use std::collections::BTreeSet;
-use std::convert::Infallible;
 
 /// A point snapped to 1e-6 grid units (all crossings here are rationals with
 /// small denominators, far apart at that resolution).
@@ -111,16 +112,6 @@ fn expected(c: [f64; 4], k: f64) -> Picture {
     p.finish()
 }
 
-#[derive(Default)]
-struct Log(Vec<Command<Point2>>);
-impl CommandSink<Point2> for Log {
-    type Error = Infallible;
-    fn command(&mut self, _: usize, c: Command<Point2>) -> Result<(), Infallible> {
-        self.0.push(c);
-        Ok(())
-    }
-}
-
 /// Cleanliness problems of a command stream (beyond the picture itself).
 #[derive(Debug, Default, PartialEq)]
 struct Untidy {
@@ -180,7 +171,7 @@ fn contour(c: [f32; 4], k: f32, traversal: Traversal) -> Vec<Command<Point2>> {
     let grid = Grid2::new(&data, 2, 2).unwrap();
     let mut log = Log::default();
     contour_grid(&grid, &[k], traversal, Point2::new, &mut log).unwrap();
-    log.0
+    log.0.into_iter().map(|(_, c)| c).collect()
 }
 
 #[test]

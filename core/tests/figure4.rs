@@ -16,22 +16,12 @@
 //! the centre at the level, `=` and `#` a border edge drawn along its length;
 //! the drawn contour runs between them.
 
-use isoscope_core::command::{Command, CommandSink, Point2};
+mod common;
+use common::Log;
+use isoscope_core::command::{Command, Point2};
 use isoscope_core::contour::{ContourStats, contour_grid};
 use isoscope_core::grid::Grid2;
 use isoscope_core::trace::Traversal;
-use std::convert::Infallible;
-
-#[derive(Default)]
-struct Log(Vec<(usize, Command<Point2>)>);
-
-impl CommandSink<Point2> for Log {
-    type Error = Infallible;
-    fn command(&mut self, level: usize, c: Command<Point2>) -> Result<(), Infallible> {
-        self.0.push((level, c));
-        Ok(())
-    }
-}
 
 fn show(c: &Command<Point2>) -> String {
     let p = c.point();

@@ -1,21 +1,12 @@
 //! The paper's Figures 5b and 7b, reproduced to the printed four decimals.
 //! Grid values come from the printed coordinates (1-based, as in the paper).
 
-use isoscope_core::command::{Command, CommandSink, Point2};
+mod common;
+use common::Log;
+use isoscope_core::command::{Command, Point2};
 use isoscope_core::contour::contour_grid;
 use isoscope_core::grid::Grid2;
 use isoscope_core::trace::Traversal;
-use std::convert::Infallible;
-
-#[derive(Default)]
-struct Log(Vec<(usize, Command<Point2>)>);
-impl CommandSink<Point2> for Log {
-    type Error = Infallible;
-    fn command(&mut self, level: usize, c: Command<Point2>) -> Result<(), Infallible> {
-        self.0.push((level, c));
-        Ok(())
-    }
-}
 
 /// Contour a single 2x2 subgrid whose lower-left grid point is `origin`
 /// (1-based) and render the commands as `S(x,y)` / `D(x,y)` / `P(x,y)`.

@@ -17,7 +17,9 @@
 //! that `contour_grid` emits exactly the concatenation of those, so the
 //! per-subgrid properties hold for `contour_grid`'s output.
 
-use isoscope_core::command::{Command, CommandSink, Point2, Point3};
+mod common;
+use common::Log;
+use isoscope_core::command::{Command, Point2, Point3};
 use isoscope_core::contour::{ContourError, ContourStats, contour_grid, contour_subgrid};
 use isoscope_core::grid::{Grid2, GridError, Plane, Planes, Volume};
 use isoscope_core::pen::Placement;
@@ -42,17 +44,6 @@ fn config() -> ProptestConfig {
 // Sinks
 
 type Cmd = Command<Point2>;
-
-#[derive(Default)]
-struct Log(Vec<(usize, Cmd)>);
-
-impl CommandSink<Point2> for Log {
-    type Error = Infallible;
-    fn command(&mut self, level: usize, c: Cmd) -> Result<(), Infallible> {
-        self.0.push((level, c));
-        Ok(())
-    }
-}
 
 #[derive(Default)]
 struct VolLog(Vec<(SliceId, usize, Command<Point3>)>);
