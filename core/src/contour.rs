@@ -152,6 +152,67 @@ pub fn contour_subgrid<P, S: CommandSink<P>>(
     Ok(sent)
 }
 
+/// Contours one row of cells at a time from rows of samples already
+/// widened to `f32`: the streaming path, where the grid is never whole in
+/// memory (the device engine decodes two rows, contours, moves on).
+///
+/// Cell `i` of row `j` has the corners `lower[i], lower[i + 1]` (at grid
+/// row `j`) and `upper[i], upper[i + 1]` (row `j + 1`), and sits at
+/// `(i, j)`: the commands, and every coordinate, are bit-identical to those
+/// [`contour_grid`] draws for the same cells of a whole grid.
+#[derive(Debug)]
+pub struct RowContourer<'l> {
+    sweep: Sweep<'l>,
+    scratch: Scratch,
+}
+
+impl<'l> RowContourer<'l> {
+    /// A contourer for `levels`.
+    ///
+    /// # Errors
+    /// [`ContourError::NonFiniteLevel`].
+    pub fn new<E>(levels: &'l [f32], traversal: Traversal) -> Result<Self, ContourError<E>> {
+        check_levels(levels)?;
+        Ok(Self { sweep: Sweep::new(levels, traversal), scratch: Scratch::new() })
+    }
+
+    /// Contour the cells between the sample rows `lower` (grid row `j`) and
+    /// `upper` (row `j + 1`); the shorter row sets the length. Points are
+    /// placed by `place(x, y)` from grid coordinates; `stats` adds up.
+    ///
+    /// # Errors
+    /// The sink's error.
+    pub fn row<P, S: CommandSink<P>>(
+        &mut self,
+        lower: &[f32],
+        upper: &[f32],
+        j: usize,
+        place: impl Fn(f32, f32) -> P,
+        sink: &mut S,
+        stats: &mut ContourStats,
+    ) -> Result<(), S::Error> {
+        let nx = lower.len().min(upper.len());
+        let mut i0 = 0;
+        while i0 + 1 < nx {
+            let n = (nx - 1 - i0).min(BLOCK);
+            let r0 = lower.get(i0..=i0 + n).unwrap_or(&[]);
+            let r1 = upper.get(i0..=i0 + n).unwrap_or(&[]);
+            let (l0, l1) = (r0.get(1..).unwrap_or(&[]), r1.get(1..).unwrap_or(&[]));
+            self.sweep.run(
+                [r0, l0, l1, r1],
+                &mut self.scratch.busy,
+                |k| Placement::new(i0 + k, j),
+                |_, x, y| place(x, y),
+                sink,
+                stats,
+            )?;
+            i0 += n;
+        }
+        stats.cells += nx.saturating_sub(1) as u64;
+        Ok(())
+    }
+}
+
 /// Contour every subgrid of `grid` at every level, in row order (`j`, then
 /// `i`). Points are placed by `place(x, y)` from grid coordinates.
 ///

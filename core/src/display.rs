@@ -214,6 +214,12 @@ where
         lens.iter().all(|&l| l >= cap).then_some(p)
     }
 
+    /// Whether every part holds at least `capacity` entries: enough for a
+    /// list of that capacity.
+    pub fn fits(&mut self, capacity: usize) -> bool {
+        self.parts(capacity).is_some()
+    }
+
     /// Scratch over caller storage (each part at least the list's capacity).
     pub fn with_storage(a: U, b: U, c: U, d: U, edges: W, back: P, back_flags: F) -> Self {
         Self { a, b, c, d, edges, back, back_flags }

@@ -24,6 +24,8 @@
 //!   statistics.
 //! - [`dac`]: the `Dac` trait; [`mock_dac`]: a heap-free mock with ASCII
 //!   art; `spi_dac` (feature `embedded-hal`): the MCP4922.
+//! - [`engine`]: the device engine behind the UART: streaming volumes slice
+//!   by slice, a double-buffered picture, view changes without the volume.
 //! - [`wire`]: the UART frame protocol shared by host and device (postcard,
 //!   CRC-32, COBS; see `docs/wire-format.md`).
 //!
@@ -76,6 +78,7 @@ pub mod contour;
 pub mod dac;
 pub mod demo;
 pub mod display;
+pub mod engine;
 pub mod grid;
 pub mod mock_dac;
 pub mod pen;

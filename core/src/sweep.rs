@@ -81,6 +81,7 @@ fn mark(out: &mut [u8], [a, b, c, d]: [&[f32]; 4], klo: f32, khi: f32) {
 
 /// Scratch space for one block: lane buffers for samples that need
 /// converting, and the marks.
+#[derive(Debug)]
 pub(crate) struct Scratch {
     pub bufs: [[f32; BLOCK + 1]; 4],
     pub busy: [u8; BLOCK],

@@ -81,6 +81,11 @@ pub enum NackCode {
     Aborted,
     /// 10: the MCU cannot take the message now.
     Busy,
+    /// 11: the message is well formed but its contents are not acceptable
+    /// (no or non-finite levels, no planes, spacing not finite and positive,
+    /// dims below 2x2, an empty chunk or one running past its slice, a view
+    /// or beam setting out of range).
+    Invalid,
 }
 
 /// What the MCU is doing, reported in [`Message::Status`].

@@ -45,6 +45,19 @@ pub use frame::{
 };
 pub use message::{AXIS_X, AXIS_Y, AXIS_Z, DeviceState, Levels, MAX_LEVELS, Message, NackCode, SampleType};
 
+/// The most data bytes a sender puts in one [`Message::SliceData`] chunk.
+/// Every receiver takes chunks this large.
+pub const MAX_CHUNK: usize = 1024;
+
+/// The longest frame a receiver must take, delimiter included: a
+/// [`Message::SliceData`] of [`MAX_CHUNK`] bytes with the largest varints
+/// (variant 1, seq 3, slice 3, offset 5, length 2 bytes).
+pub const MAX_FRAME_LEN: usize = max_frame_len(1 + 3 + 3 + 5 + 2 + MAX_CHUNK);
+
+/// A decoder that takes every frame of the protocol ([`MAX_FRAME_LEN`]
+/// without the delimiter).
+pub type ProtocolDecoder = FrameDecoder<{ MAX_FRAME_LEN - 1 }>;
+
 /// The protocol version, the first byte of every frame (before COBS).
 pub const PROTOCOL_VERSION: u8 = 1;
 

@@ -1,0 +1,249 @@
+//! Streaming contouring: a volume arrives one z slice at a time, and only
+//! two slices (the previous and the current) are ever held.
+//!
+//! When slice `z` is complete, the engine contours the x-y slice `z` and,
+//! between slices `z - 1` and `z`, one row of subgrids of every x-z slice
+//! (one per `y`) and every y-z slice (one per `x`). Together these are all
+//! the subgrids of the whole chicken-wire surface, with commands and
+//! coordinates bit-identical to contouring the whole volume at once
+//! ([`crate::surface::contour_volume`]); only their order differs.
+
+use super::geometry::Geometry;
+use crate::command::{Command, CommandSink, Point3};
+use crate::contour::{ContourStats, RowContourer};
+use crate::trace::Traversal;
+use crate::wire::{AXIS_X, AXIS_Y, AXIS_Z, Levels, NackCode, SampleType};
+use core::convert::Infallible;
+
+/// A volume as `BeginVolume` announced it, checked.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct VolumeSpec {
+    /// Samples along x, y, z (x, y at least 2; z at least 1).
+    pub dims: [u16; 3],
+    /// The type of the samples.
+    pub sample_type: SampleType,
+    /// Voxel spacing along x, y, z (finite, positive).
+    pub spacing: [f32; 3],
+    /// Contour levels (at least one, all finite).
+    pub levels: Levels,
+    /// Slicing planes: a set of [`AXIS_X`] (y-z slices), [`AXIS_Y`] (x-z
+    /// slices) and [`AXIS_Z`] (x-y slices).
+    pub axes: u8,
+}
+
+impl VolumeSpec {
+    /// Bytes in one z slice.
+    pub fn slice_bytes(&self) -> usize {
+        usize::from(self.dims[0]) * usize::from(self.dims[1]) * self.sample_type.size()
+    }
+
+    /// Check a volume against the buffers: `Invalid` for contents that no
+    /// device takes, `DimsOverCapacity` for a slice or row that does not fit.
+    pub(crate) fn check(&self, slice_capacity: usize, row_capacity: usize) -> Result<(), NackCode> {
+        let [nx, ny, nz] = self.dims.map(usize::from);
+        let levels_ok = !self.levels.is_empty() && self.levels.as_slice().iter().all(|l| l.is_finite());
+        let spacing_ok = self.spacing.iter().all(|s| s.is_finite() && *s > 0.0);
+        let axes_ok = self.axes != 0 && self.axes & !(AXIS_X | AXIS_Y | AXIS_Z) == 0;
+        if nx < 2 || ny < 2 || nz < 1 || !levels_ok || !spacing_ok || !axes_ok {
+            return Err(NackCode::Invalid);
+        }
+        if self.slice_bytes() > slice_capacity || nx.max(ny) > row_capacity {
+            return Err(NackCode::DimsOverCapacity);
+        }
+        Ok(())
+    }
+}
+
+/// A transfer in progress.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Transfer {
+    pub spec: VolumeSpec,
+    /// The slice being received.
+    pub z: u16,
+    /// Bytes of slice `z` received.
+    pub offset: u32,
+    /// When the last accepted message of the transfer came (ms).
+    pub last_ms: u32,
+    /// Contouring so far.
+    pub stats: ContourStats,
+}
+
+/// The two slices, the decoded rows and the transfer state.
+#[derive(Debug)]
+pub(crate) struct Stream<'a> {
+    slots: [&'a mut [u8]; 2],
+    rows: [&'a mut [f32]; 2],
+    /// The slot receiving slice `z`; the other holds slice `z - 1`.
+    cur: usize,
+    pub transfer: Option<Transfer>,
+}
+
+/// Keeps every command; the geometry counts what does not fit.
+struct Keep<'g, 'a>(&'g mut Geometry<'a>);
+
+impl CommandSink<Point3> for Keep<'_, '_> {
+    type Error = Infallible;
+    #[inline]
+    fn command(&mut self, _level: usize, c: Command<Point3>) -> Result<(), Infallible> {
+        let _ = self.0.push(c);
+        Ok(())
+    }
+}
+
+/// Samples `start, start + stride, ...` of a slice of little-endian
+/// samples, widened to `f32` into all of `out` (NaN past the end).
+fn decode(ty: SampleType, bytes: &[u8], start: usize, stride: usize, out: &mut [f32]) {
+    let size = ty.size();
+    for (k, o) in out.iter_mut().enumerate() {
+        let at = (start + k * stride) * size;
+        let b = bytes.get(at..at + size).unwrap_or(&[]);
+        *o = match ty {
+            SampleType::U8 => b.first().map_or(f32::NAN, |&v| f32::from(v)),
+            SampleType::U16 => b.try_into().map_or(f32::NAN, |v| f32::from(u16::from_le_bytes(v))),
+            SampleType::I16 => b.try_into().map_or(f32::NAN, |v| f32::from(i16::from_le_bytes(v))),
+            SampleType::F32 => b.try_into().map_or(f32::NAN, f32::from_le_bytes),
+        };
+    }
+}
+
+impl<'a> Stream<'a> {
+    pub(crate) fn new(slots: [&'a mut [u8]; 2], rows: [&'a mut [f32]; 2]) -> Self {
+        Self { slots, rows, cur: 0, transfer: None }
+    }
+
+    /// Bytes one slice may hold.
+    pub(crate) fn slice_capacity(&self) -> usize {
+        self.slots.iter().map(|s| s.len()).min().unwrap_or(0)
+    }
+
+    /// Samples one row may hold.
+    pub(crate) fn row_capacity(&self) -> usize {
+        self.rows.iter().map(|s| s.len()).min().unwrap_or(0)
+    }
+
+    /// Start receiving a checked volume.
+    pub(crate) fn begin(&mut self, spec: VolumeSpec, now_ms: u32) {
+        self.cur = 0;
+        self.transfer =
+            Some(Transfer { spec, z: 0, offset: 0, last_ms: now_ms, stats: ContourStats::default() });
+    }
+
+    /// Take a chunk of slice `slice` at byte `offset`; when it completes the
+    /// slice, contour what the slice completes into `geometry`.
+    pub(crate) fn chunk(
+        &mut self,
+        slice: u16,
+        offset: u32,
+        data: &[u8],
+        now_ms: u32,
+        geometry: &mut Geometry<'_>,
+    ) -> Result<(), NackCode> {
+        let t = self.transfer.as_mut().ok_or(NackCode::Aborted)?;
+        let slice_bytes = t.spec.slice_bytes();
+        if slice >= t.spec.dims[2] {
+            return Err(NackCode::Invalid);
+        }
+        if (slice, offset) < (t.z, t.offset) {
+            return Err(NackCode::Duplicate);
+        }
+        if (slice, offset) > (t.z, t.offset) {
+            return Err(NackCode::OutOfOrder);
+        }
+        let start = offset as usize;
+        let end = start + data.len();
+        if data.is_empty() || end > slice_bytes {
+            return Err(NackCode::Invalid);
+        }
+        let [a, b] = &mut self.slots;
+        let slot = if self.cur == 0 { a } else { b };
+        slot.get_mut(start..end).ok_or(NackCode::DimsOverCapacity)?.copy_from_slice(data);
+        t.last_ms = now_ms;
+        if end < slice_bytes {
+            t.offset = end as u32;
+            return Ok(());
+        }
+        let (spec, z) = (t.spec, t.z);
+        let stats = self.contour(&spec, z, geometry);
+        if let Some(t) = self.transfer.as_mut() {
+            t.stats += stats;
+            t.z += 1;
+            t.offset = 0;
+        }
+        self.cur = 1 - self.cur;
+        Ok(())
+    }
+
+    /// Contour what slice `z` (in the current slot; `z - 1` in the other)
+    /// completes.
+    fn contour(&mut self, spec: &VolumeSpec, z: u16, geometry: &mut Geometry<'_>) -> ContourStats {
+        let mut stats = ContourStats::default();
+        let Ok(mut rc) = RowContourer::new::<Infallible>(spec.levels.as_slice(), Traversal::Corrected) else {
+            return stats;
+        };
+        let [nx, ny] = [usize::from(spec.dims[0]), usize::from(spec.dims[1])];
+        let ty = spec.sample_type;
+        let [s0, s1] = &self.slots;
+        let (cur, prev): (&[u8], &[u8]) = if self.cur == 0 { (s0, s1) } else { (s1, s0) };
+        let [r0, r1] = &mut self.rows;
+        let (Some(mut lo), Some(mut hi)) = (r0.get_mut(..nx.max(ny)), r1.get_mut(..nx.max(ny))) else {
+            return stats;
+        };
+        let mut sink = Keep(geometry);
+        let zf = f32::from(z);
+        if spec.axes & AXIS_Z != 0 {
+            // The x-y slice z, row pair by row pair.
+            decode(ty, cur, 0, 1, lo.get_mut(..nx).unwrap_or(&mut []));
+            for j in 0..ny - 1 {
+                decode(ty, cur, (j + 1) * nx, 1, hi.get_mut(..nx).unwrap_or(&mut []));
+                let (l, h) = (lo.get(..nx).unwrap_or(&[]), hi.get(..nx).unwrap_or(&[]));
+                let _ = rc.row(l, h, j, |x, y| Point3::new(x, y, zf), &mut sink, &mut stats);
+                core::mem::swap(&mut lo, &mut hi);
+            }
+        }
+        if z == 0 {
+            return stats;
+        }
+        let below = usize::from(z - 1);
+        if spec.axes & AXIS_Y != 0 {
+            // Row `z - 1` of subgrids of every x-z slice (one per y).
+            for j in 0..ny {
+                decode(ty, prev, j * nx, 1, lo.get_mut(..nx).unwrap_or(&mut []));
+                decode(ty, cur, j * nx, 1, hi.get_mut(..nx).unwrap_or(&mut []));
+                let (l, h) = (lo.get(..nx).unwrap_or(&[]), hi.get(..nx).unwrap_or(&[]));
+                let y = j as f32;
+                let _ = rc.row(l, h, below, |x, v| Point3::new(x, y, v), &mut sink, &mut stats);
+            }
+        }
+        if spec.axes & AXIS_X != 0 {
+            // Row `z - 1` of subgrids of every y-z slice (one per x).
+            for i in 0..nx {
+                decode(ty, prev, i, nx, lo.get_mut(..ny).unwrap_or(&mut []));
+                decode(ty, cur, i, nx, hi.get_mut(..ny).unwrap_or(&mut []));
+                let (l, h) = (lo.get(..ny).unwrap_or(&[]), hi.get(..ny).unwrap_or(&[]));
+                let x = i as f32;
+                let _ = rc.row(l, h, below, |u, v| Point3::new(x, u, v), &mut sink, &mut stats);
+            }
+        }
+        stats
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn decode_little_endian_types() {
+        let mut out = [0.0f32; 3];
+        decode(SampleType::U8, &[1, 2, 3, 4, 5, 6], 1, 2, &mut out);
+        assert_eq!(out, [2.0, 4.0, 6.0]);
+        decode(SampleType::U16, &[0x34, 0x12, 0xFF, 0xFF], 0, 1, &mut out);
+        assert_eq!(out[..2], [4660.0, 65535.0]);
+        assert!(out[2].is_nan(), "past the end is NaN");
+        decode(SampleType::I16, &[0xFE, 0xFF, 0x00, 0x80], 0, 1, &mut out[..2]);
+        assert_eq!(out[..2], [-2.0, -32768.0]);
+        decode(SampleType::F32, &1.5f32.to_le_bytes(), 0, 1, &mut out[..1]);
+        assert_eq!(out[0], 1.5);
+    }
+}

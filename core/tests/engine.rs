@@ -1,0 +1,780 @@
+//! The device engine: streaming equals whole-volume contouring, the picture
+//! survives every kind of bad transfer, retransmissions are answered without
+//! being applied twice, and no input panics.
+
+use isoscope_core::command::{Command, Point3};
+use isoscope_core::demo::Demo;
+use isoscope_core::display::ScratchStore;
+use isoscope_core::engine::{AbortReason, Buffers, Engine, EngineConfig, Event};
+use isoscope_core::grid::{Planes, Volume};
+use isoscope_core::screen::ScreenPoint;
+use isoscope_core::surface::{SliceId, SurfaceSink, contour_volume};
+use isoscope_core::trace::Traversal;
+use isoscope_core::wire::{
+    AXIS_X, AXIS_Y, AXIS_Z, DeviceState, FrameDecoder, Levels, MAX_CHUNK, Message, NackCode,
+    PROTOCOL_VERSION, SampleType, encode,
+};
+use proptest::prelude::*;
+use std::convert::Infallible;
+
+/// Engine memory on the heap, for tests.
+struct Mem {
+    slices: [Vec<u8>; 2],
+    rows: [Vec<f32>; 2],
+    points: [Vec<Point3>; 2],
+    kinds: [Vec<u8>; 2],
+    screen: Vec<ScreenPoint>,
+    flags: Vec<u8>,
+    index: [Vec<u32>; 4],
+    edges: Vec<u64>,
+    back: Vec<ScreenPoint>,
+    back_flags: Vec<u8>,
+}
+
+impl Mem {
+    fn new(slice: usize, extent: usize, points: usize) -> Self {
+        Self {
+            slices: [vec![0; slice], vec![0; slice]],
+            rows: [vec![0.0; extent], vec![0.0; extent]],
+            points: [vec![Point3::default(); points], vec![Point3::default(); points]],
+            kinds: [vec![0; points], vec![0; points]],
+            screen: vec![ScreenPoint::default(); points],
+            flags: vec![0; points],
+            index: [vec![0; points], vec![0; points], vec![0; points], vec![0; points]],
+            edges: vec![0; points],
+            back: vec![ScreenPoint::default(); points],
+            back_flags: vec![0; points],
+        }
+    }
+
+    fn buffers(&mut self) -> Buffers<'_> {
+        let [s0, s1] = &mut self.slices;
+        let [r0, r1] = &mut self.rows;
+        let [p0, p1] = &mut self.points;
+        let [k0, k1] = &mut self.kinds;
+        let [a, b, c, d] = &mut self.index;
+        Buffers {
+            slices: [s0, s1],
+            rows: [r0, r1],
+            geometry: [(p0, k0), (p1, k1)],
+            screen: (&mut self.screen, &mut self.flags),
+            scratch: ScratchStore::with_storage(
+                a,
+                b,
+                c,
+                d,
+                &mut self.edges,
+                &mut self.back,
+                &mut self.back_flags,
+            ),
+        }
+    }
+}
+
+/// A volume to send.
+#[derive(Clone)]
+struct Vol {
+    dims: [u16; 3],
+    ty: SampleType,
+    bytes: Vec<u8>,
+    values: Vec<f32>,
+    levels: Vec<f32>,
+    axes: u8,
+}
+
+impl Vol {
+    /// A demo volume quantised to `ty` (u8/u16 scaled to 0..=200 or 0..=40000).
+    fn demo(demo: Demo, n: usize, ty: SampleType) -> Self {
+        let mut values = vec![0.0; n * n * n];
+        demo.fill(n, &mut values).unwrap();
+        let (lo, hi) = values.iter().fold((f32::MAX, f32::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+        let scale = |v: f32, top: f32| ((v - lo) / (hi - lo) * top).round();
+        let mut bytes = Vec::new();
+        for v in &mut values {
+            match ty {
+                SampleType::U8 => {
+                    *v = scale(*v, 200.0);
+                    bytes.push(*v as u8);
+                }
+                SampleType::U16 => {
+                    *v = scale(*v, 40000.0);
+                    bytes.extend((*v as u16).to_le_bytes());
+                }
+                SampleType::I16 => {
+                    *v = scale(*v, 40000.0) - 20000.0;
+                    bytes.extend((*v as i16).to_le_bytes());
+                }
+                SampleType::F32 => bytes.extend(v.to_le_bytes()),
+            }
+        }
+        let mid = |t: f32| lo + (hi - lo) * t;
+        let levels = match ty {
+            SampleType::U8 => vec![60.5, 120.0],
+            SampleType::U16 => vec![15000.0],
+            SampleType::I16 => vec![-5000.0, 2500.5],
+            SampleType::F32 => vec![mid(0.3), mid(0.55)],
+        };
+        let d = n as u16;
+        Self { dims: [d, d, d], ty, bytes, values, levels, axes: AXIS_X | AXIS_Y | AXIS_Z }
+    }
+
+    fn slice_bytes(&self) -> usize {
+        usize::from(self.dims[0]) * usize::from(self.dims[1]) * self.ty.size()
+    }
+}
+
+/// Frames a host would send.
+struct Host {
+    seq: u16,
+}
+
+fn frame(msg: &Message<'_>) -> Vec<u8> {
+    let mut buf = vec![0u8; 2048];
+    encode(msg, &mut buf).unwrap().to_vec()
+}
+
+impl Host {
+    fn new() -> Self {
+        Self { seq: 100 }
+    }
+
+    fn next(&mut self) -> u16 {
+        self.seq = self.seq.wrapping_add(1);
+        self.seq
+    }
+
+    fn hello() -> Vec<u8> {
+        frame(&Message::Hello { protocol: PROTOCOL_VERSION, firmware: [0, 0, 0] })
+    }
+
+    fn begin(&mut self, v: &Vol) -> Vec<u8> {
+        let seq = self.next();
+        frame(&Message::BeginVolume {
+            seq,
+            dims: v.dims,
+            sample_type: v.ty,
+            spacing: [1.0; 3],
+            levels: Levels::from_slice(&v.levels).unwrap(),
+            axes: v.axes,
+        })
+    }
+
+    /// Every chunk of every slice, `chunk` bytes at most, one frame each.
+    fn slices(&mut self, v: &Vol, chunk: usize) -> Vec<Vec<u8>> {
+        self.first_slices(v, chunk, usize::MAX)
+    }
+
+    /// The first `count` chunks of [`Host::slices`].
+    fn first_slices(&mut self, v: &Vol, chunk: usize, count: usize) -> Vec<Vec<u8>> {
+        let mut out = Vec::new();
+        for (z, slice) in v.bytes.chunks(v.slice_bytes()).enumerate() {
+            for (k, data) in slice.chunks(chunk).enumerate() {
+                if out.len() == count {
+                    return out;
+                }
+                let seq = self.next();
+                out.push(frame(&Message::SliceData {
+                    seq,
+                    slice: z as u16,
+                    offset: (k * chunk) as u32,
+                    data,
+                }));
+            }
+        }
+        out
+    }
+
+    fn end(&mut self) -> Vec<u8> {
+        let seq = self.next();
+        frame(&Message::EndVolume { seq })
+    }
+
+    /// Hello, then the whole volume.
+    fn volume(&mut self, v: &Vol) -> Vec<u8> {
+        let mut out = Self::hello();
+        out.extend(self.begin(v));
+        out.extend(self.slices(v, MAX_CHUNK).concat());
+        out.extend(self.end());
+        out
+    }
+}
+
+/// The engine's answers, decoded.
+fn answers(e: &mut Engine<'_>) -> Vec<Message<'static>> {
+    let mut bytes = vec![0u8; 1 << 16];
+    let n = e.transmit(&mut bytes);
+    let mut dec = FrameDecoder::<256>::new();
+    let mut out = Vec::new();
+    for &b in &bytes[..n] {
+        if let Some(r) = dec.push(b) {
+            let m = r.expect("the engine sends valid frames");
+            out.push(match m {
+                Message::Ack { seq } => Message::Ack { seq },
+                Message::Nack { seq, code } => Message::Nack { seq, code },
+                Message::Status { seq, state, slices, points, refresh_centi_hz } => {
+                    Message::Status { seq, state, slices, points, refresh_centi_hz }
+                }
+                Message::Hello { protocol, firmware } => Message::Hello { protocol, firmware },
+                Message::Capabilities { protocol, max_slice_samples, sample_types, display_points } => {
+                    Message::Capabilities { protocol, max_slice_samples, sample_types, display_points }
+                }
+                other => panic!("the engine sent a host message: {other:?}"),
+            });
+        }
+    }
+    out
+}
+
+fn events(e: &mut Engine<'_>) -> Vec<Event> {
+    std::iter::from_fn(|| e.next_event()).collect()
+}
+
+fn nacks(msgs: &[Message<'_>]) -> Vec<NackCode> {
+    msgs.iter()
+        .filter_map(|m| match m {
+            Message::Nack { code, .. } => Some(*code),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The display list as comparable bits.
+fn picture(e: &Engine<'_>) -> Vec<(u32, u32, bool)> {
+    e.display()
+        .commands()
+        .map(|c| (c.point().x.to_bits(), c.point().y.to_bits(), matches!(c, Command::MoveTo(_))))
+        .collect()
+}
+
+type Frag = Vec<[u32; 3]>;
+
+/// Commands cut into fragments (a MoveTo or Point starts one), sorted.
+fn fragments(cmds: impl Iterator<Item = Command<Point3>>) -> Vec<(bool, Frag)> {
+    let mut out: Vec<(bool, Frag)> = Vec::new();
+    for c in cmds {
+        let p = c.point();
+        let key = [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+        match c {
+            Command::MoveTo(_) => out.push((false, vec![key])),
+            Command::Point(_) => out.push((true, vec![key])),
+            Command::LineTo(_) => out.last_mut().unwrap().1.push(key),
+        }
+    }
+    out.sort();
+    out
+}
+
+struct Keep(Vec<Command<Point3>>);
+impl SurfaceSink for Keep {
+    type Error = Infallible;
+    fn command(&mut self, _: SliceId, _: usize, c: Command<Point3>) -> Result<(), Infallible> {
+        self.0.push(c);
+        Ok(())
+    }
+}
+
+fn batch(v: &Vol) -> Vec<(bool, Frag)> {
+    let [nx, ny, nz] = v.dims.map(usize::from);
+    let vol = Volume::new(&v.values, nx, ny, nz).unwrap();
+    let mut planes = Planes::NONE;
+    for (bit, plane) in [
+        (AXIS_Z, isoscope_core::grid::Plane::XY),
+        (AXIS_Y, isoscope_core::grid::Plane::XZ),
+        (AXIS_X, isoscope_core::grid::Plane::YZ),
+    ] {
+        if v.axes & bit != 0 {
+            planes = planes.with(plane);
+        }
+    }
+    let mut keep = Keep(Vec::new());
+    contour_volume(&vol, planes, &v.levels, Traversal::Corrected, &mut keep).unwrap();
+    fragments(keep.0.into_iter())
+}
+
+fn engine(mem: &mut Mem) -> Engine<'_> {
+    Engine::new(EngineConfig::default(), mem.buffers()).unwrap()
+}
+
+fn big() -> Mem {
+    Mem::new(64 * 64 * 4, 64, 200_000)
+}
+
+#[test]
+fn streaming_equals_whole_volume_contouring_for_every_sample_type() {
+    for (demo, n, ty) in [
+        (Demo::Hydrogen, 20, SampleType::U8),
+        (Demo::Gyroid, 17, SampleType::U16),
+        (Demo::Torus, 16, SampleType::I16),
+        (Demo::Sphere, 15, SampleType::F32),
+        (Demo::Gyroid, 18, SampleType::F32),
+    ] {
+        let v = Vol::demo(demo, n, ty);
+        let mut mem = big();
+        let mut e = engine(&mut mem);
+        let mut host = Host::new();
+        // Odd chunk sizes, so that chunks straddle rows.
+        let mut bytes = Host::hello();
+        bytes.extend(host.begin(&v));
+        bytes.extend(host.slices(&v, 333).concat());
+        bytes.extend(host.end());
+        e.feed(&bytes, 0);
+        assert!(nacks(&answers(&mut e)).is_empty());
+        let got = fragments(e.surface().unwrap().commands());
+        let want = batch(&v);
+        assert!(!want.is_empty());
+        assert_eq!(got.len(), want.len(), "{demo:?} {ty:?}");
+        assert!(got == want, "{demo:?} {ty:?}: fragments differ");
+        assert!(e.update(1));
+        assert!(!e.display().is_empty());
+        assert_eq!(e.state(), DeviceState::Showing);
+    }
+}
+
+#[test]
+fn single_planes_stream_too() {
+    for axes in [AXIS_X, AXIS_Y, AXIS_Z, AXIS_X | AXIS_Z] {
+        let v = Vol { axes, ..Vol::demo(Demo::Hydrogen, 14, SampleType::U8) };
+        let mut mem = big();
+        let mut e = engine(&mut mem);
+        e.feed(&Host::new().volume(&v), 0);
+        assert_eq!(fragments(e.surface().unwrap().commands()), batch(&v), "axes {axes}");
+    }
+}
+
+#[test]
+fn every_command_is_answered_in_order_and_status_follows_the_end() {
+    let v = Vol::demo(Demo::Sphere, 8, SampleType::U8);
+    let mut mem = big();
+    let mut e = engine(&mut mem);
+    let mut host = Host::new();
+    e.feed(&Host::hello(), 0);
+    let hi = answers(&mut e);
+    assert!(matches!(hi[0], Message::Hello { protocol: PROTOCOL_VERSION, .. }));
+    assert!(matches!(hi[1], Message::Capabilities { max_slice_samples: 16384, display_points: 200_000, .. }));
+    assert!(matches!(hi[2], Message::Status { state: DeviceState::Idle, .. }));
+    e.feed(&host.begin(&v), 0);
+    for f in host.slices(&v, 20) {
+        e.feed(&f, 1);
+    }
+    e.feed(&host.end(), 2);
+    let a = answers(&mut e);
+    let acks: Vec<u16> =
+        a.iter().filter_map(|m| if let Message::Ack { seq } = m { Some(*seq) } else { None }).collect();
+    assert_eq!(acks, (101..=host.seq).collect::<Vec<_>>());
+    assert!(matches!(a.last(), Some(Message::Status { state: DeviceState::Showing, slices: 0, .. })));
+    let ev = events(&mut e);
+    assert!(matches!(ev[0], Event::Hello { .. }));
+    assert!(matches!(ev[1], Event::Begun { dims: [8, 8, 8], .. }));
+    assert!(matches!(ev[2], Event::Committed { dims: [8, 8, 8], dropped: 0, .. }));
+}
+
+/// Commit `a`, then run `bad` (frames), then check the picture is `a`'s.
+fn picture_survives(bad: impl FnOnce(&mut Engine<'_>, &mut Host, &Vol)) -> Vec<Event> {
+    let a = Vol::demo(Demo::Torus, 12, SampleType::U8);
+    let b = Vol::demo(Demo::Gyroid, 12, SampleType::U8);
+    let mut mem = big();
+    let mut e = engine(&mut mem);
+    let mut host = Host::new();
+    e.feed(&host.volume(&a), 0);
+    e.update(0);
+    let before = picture(&e);
+    let generation = e.generation();
+    answers(&mut e);
+    events(&mut e);
+    bad(&mut e, &mut host, &b);
+    e.update(10);
+    assert_eq!(e.generation(), generation, "the display list was rebuilt");
+    assert_eq!(picture(&e), before, "the picture changed");
+    let ev = events(&mut e);
+    assert!(!ev.iter().any(|x| matches!(x, Event::Committed { .. })), "{ev:?}");
+    // And the next good volume shows.
+    e.feed(&host.volume(&b), 20);
+    e.update(20);
+    assert_eq!(fragments(e.surface().unwrap().commands()), batch(&b));
+    ev
+}
+
+#[test]
+fn corrupt_crc_is_nacked_and_retransmission_recovers() {
+    picture_survives(|e, host, b| {
+        e.feed(&Host::hello(), 1);
+        e.feed(&host.begin(b), 1);
+        let chunks = host.slices(b, 500);
+        let mut bad = chunks[3].clone();
+        bad[10] ^= 0x40;
+        for c in &chunks[..3] {
+            e.feed(c, 1);
+        }
+        e.feed(&bad, 1);
+        e.feed(&chunks[4], 1);
+        let a = answers(e);
+        assert!(
+            a.contains(&Message::Nack { seq: host.seq - chunks.len() as u16 + 4, code: NackCode::BadCrc }),
+            "{a:?}"
+        );
+        assert!(nacks(&a).contains(&NackCode::OutOfOrder));
+        // Go back: resend from the lost one; stop half-way (abandoned below).
+        for c in &chunks[3..6] {
+            e.feed(c, 2);
+        }
+        let a = answers(e);
+        assert!(nacks(&a).is_empty(), "{a:?}");
+        assert_eq!(a.len(), 3);
+    });
+}
+
+#[test]
+fn truncated_frame_garbage_and_wrong_version() {
+    let ev = picture_survives(|e, host, b| {
+        let begin = host.begin(b);
+        e.feed(&begin[..begin.len() / 2], 1);
+        e.feed(&[0], 1); // the cut frame ends here
+        e.feed(b"\x13\x37garbage\xFF\xFE", 1);
+        e.feed(&[0], 1);
+        let mut v2 = Vec::new();
+        // Version 2 with a good CRC: decoded, refused.
+        let msg = frame(&Message::EndVolume { seq: 1 });
+        let mut raw = msg[..msg.len() - 1].to_vec();
+        let n = isoscope_core::wire::cobs_decode_in_place(&mut raw).unwrap();
+        raw.truncate(n);
+        raw[0] = 2;
+        let body = raw.len() - 4;
+        let crc = isoscope_core::wire::crc32(&raw[..body]);
+        raw[body..].copy_from_slice(&crc.to_le_bytes());
+        v2.extend(cobs(&raw));
+        e.feed(&v2, 1);
+        let codes = nacks(&answers(e));
+        // A frame cut inside its last COBS block fails the CRC; the garbage's
+        // first code byte promises more than there is.
+        assert_eq!(codes, [NackCode::BadCrc, NackCode::Truncated, NackCode::BadVersion], "{codes:?}");
+    });
+    assert!(ev.iter().any(|x| matches!(x, Event::FrameError { .. })));
+}
+
+/// COBS-encode with the delimiter (independent of the core's encoder).
+fn cobs(data: &[u8]) -> Vec<u8> {
+    let mut out = vec![0];
+    let mut code_at = 0;
+    let mut code = 1u8;
+    for &b in data {
+        if b == 0 {
+            out[code_at] = code;
+            code_at = out.len();
+            out.push(0);
+            code = 1;
+        } else {
+            out.push(b);
+            code += 1;
+            if code == 0xFF {
+                out[code_at] = code;
+                code_at = out.len();
+                out.push(0);
+                code = 1;
+            }
+        }
+    }
+    out[code_at] = code;
+    out.push(0);
+    out
+}
+
+#[test]
+fn oversize_frame_is_nacked() {
+    picture_survives(|e, _, _| {
+        let mut f = vec![0x55u8; 5000];
+        f.push(0);
+        e.feed(&f, 1);
+        assert_eq!(nacks(&answers(e)), [NackCode::Oversize]);
+    });
+}
+
+#[test]
+fn dims_over_capacity_and_invalid_volumes_are_refused() {
+    picture_survives(|e, host, b| {
+        let too_big = Vol { dims: [65, 64, 3], ..b.clone() };
+        e.feed(&host.begin(&too_big), 1);
+        let wide = Vol { dims: [4000, 2, 3], ty: SampleType::U8, ..b.clone() };
+        e.feed(&host.begin(&wide), 1);
+        let flat = Vol { dims: [1, 50, 3], ..b.clone() };
+        e.feed(&host.begin(&flat), 1);
+        let no_axes = Vol { axes: 0, ..b.clone() };
+        e.feed(&host.begin(&no_axes), 1);
+        let nan_level = Vol { levels: vec![f32::NAN], ..b.clone() };
+        e.feed(&host.begin(&nan_level), 1);
+        assert_eq!(
+            nacks(&answers(e)),
+            [
+                NackCode::DimsOverCapacity,
+                NackCode::DimsOverCapacity,
+                NackCode::Invalid,
+                NackCode::Invalid,
+                NackCode::Invalid
+            ]
+        );
+        assert_eq!(e.state(), DeviceState::Showing);
+    });
+}
+
+#[test]
+fn slices_out_of_order_duplicate_and_missing() {
+    let ev = picture_survives(|e, host, b| {
+        e.feed(&host.begin(b), 1);
+        let sb = b.slice_bytes();
+        let slice = |z: usize| &b.bytes[z * sb..(z + 1) * sb];
+        let mut send = |e: &mut Engine<'_>, z: u16, offset: u32, data: &[u8]| {
+            let seq = host.next();
+            e.feed(&frame(&Message::SliceData { seq, slice: z, offset, data }), 1);
+        };
+        send(e, 0, 0, slice(0));
+        send(e, 2, 0, slice(2)); // skipped slice 1
+        send(e, 0, 0, slice(0)); // again, with a new seq
+        send(e, 1, 10, &slice(1)[10..]); // starts mid-slice
+        send(e, 1, 0, &slice(1)[..sb - 1]);
+        send(e, 1, (sb - 1) as u32, &[1, 2]); // runs past the slice
+        send(e, 99, 0, slice(1)); // no such slice
+        let end = host.end();
+        e.feed(&end, 1);
+        assert_eq!(
+            nacks(&answers(e)),
+            [
+                NackCode::OutOfOrder,
+                NackCode::Duplicate,
+                NackCode::OutOfOrder,
+                NackCode::Invalid,
+                NackCode::Invalid,
+                NackCode::Missing
+            ]
+        );
+        assert_eq!(e.state(), DeviceState::Showing);
+    });
+    assert!(ev.contains(&Event::Aborted { reason: AbortReason::Missing, slices: 1 }), "{ev:?}");
+}
+
+#[test]
+fn abandoned_transfer_times_out_and_is_superseded() {
+    let ev = picture_survives(|e, host, b| {
+        e.feed(&host.begin(b), 1000);
+        for c in host.first_slices(b, MAX_CHUNK, 3) {
+            e.feed(&c, 1000);
+        }
+        assert_eq!(e.state(), DeviceState::Receiving);
+        e.update(1000 + 4999);
+        assert_eq!(e.state(), DeviceState::Receiving);
+        e.update(1000 + 5001);
+        assert_eq!(e.state(), DeviceState::Showing);
+        // Data for the dead transfer is refused.
+        let seq = host.next();
+        e.feed(&frame(&Message::SliceData { seq, slice: 3, offset: 0, data: &[1] }), 7000);
+        assert_eq!(nacks(&answers(e)), [NackCode::Aborted]);
+        // Half a transfer, then a new one begins and is abandoned too.
+        e.feed(&host.begin(b), 8000);
+        e.feed(&host.first_slices(b, MAX_CHUNK, 1)[0], 8000);
+        e.feed(&host.begin(b), 8000);
+    });
+    assert!(ev.contains(&Event::Aborted { reason: AbortReason::Timeout, slices: 3 }), "{ev:?}");
+    assert!(ev.contains(&Event::Aborted { reason: AbortReason::Superseded, slices: 1 }), "{ev:?}");
+}
+
+#[test]
+fn retransmitted_commands_are_answered_again_not_applied_twice() {
+    let v = Vol::demo(Demo::Sphere, 10, SampleType::U8);
+    let mut mem = big();
+    let mut e = engine(&mut mem);
+    let mut host = Host::new();
+    e.feed(&Host::hello(), 0);
+    let begin = host.begin(&v);
+    e.feed(&begin, 0);
+    let chunks = host.slices(&v, 64);
+    for c in &chunks {
+        e.feed(c, 0);
+        e.feed(c, 0); // the ack was lost: sent twice
+    }
+    e.feed(&begin, 0); // a very late duplicate: must not restart the transfer
+    e.feed(&host.end(), 0);
+    let a = answers(&mut e);
+    assert!(nacks(&a).is_empty(), "{a:?}");
+    assert_eq!(e.counters().replays as usize, chunks.len() + 1);
+    assert_eq!(fragments(e.surface().unwrap().commands()), batch(&v));
+}
+
+#[test]
+fn a_megabyte_of_noise_then_a_valid_volume_displays_correctly() {
+    let v = Vol::demo(Demo::Hydrogen, 16, SampleType::U8);
+    // The reference: a clean run.
+    let mut mem = big();
+    let mut clean = engine(&mut mem);
+    clean.feed(&Host::new().volume(&v), 0);
+    clean.update(0);
+    let want = picture(&clean);
+    let mut mem2 = big();
+    let mut e = engine(&mut mem2);
+    let mut rng = 0x2545F4914F6CDD1Du64;
+    let noise: Vec<u8> = (0..1 << 20)
+        .map(|_| {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            (rng >> 24) as u8
+        })
+        .collect();
+    for c in noise.chunks(4096) {
+        e.feed(c, 0);
+        answers(&mut e);
+    }
+    assert!(e.counters().frame_errors > 1000);
+    let mut stream = vec![0u8]; // flush the partial frame the noise left
+    stream.extend(Host::new().volume(&v));
+    e.feed(&stream, 1);
+    e.update(1);
+    assert_eq!(picture(&e), want);
+}
+
+#[test]
+fn view_changes_reproject_without_the_volume() {
+    let v = Vol::demo(Demo::Torus, 14, SampleType::U8);
+    let mut mem = big();
+    let mut e = engine(&mut mem);
+    let mut host = Host::new();
+    e.feed(&host.volume(&v), 0);
+    e.update(0);
+    let front = picture(&e);
+    let view = |host: &mut Host, yaw: f32, spin: f32| {
+        let seq = host.next();
+        frame(&Message::SetView { seq, yaw, pitch: 20.0, roll: 0.0, fov_deg: 0.0, spin_deg_per_s: spin })
+    };
+    e.feed(&view(&mut host, 75.0, 0.0), 1);
+    assert!(e.update(1));
+    assert_ne!(picture(&e), front);
+    e.feed(&view(&mut host, 30.0, 0.0), 2);
+    e.update(2);
+    assert_eq!(picture(&e), front, "the default view again");
+    assert!(!e.update(3), "nothing changed");
+    // Spinning: a new picture at every update.
+    e.feed(&view(&mut host, 30.0, 90.0), 10);
+    e.update(10);
+    let p0 = picture(&e);
+    assert!(e.update(510));
+    assert_ne!(picture(&e), p0);
+    // Refused views keep the old one.
+    let seq = host.next();
+    e.feed(
+        &frame(&Message::SetView {
+            seq,
+            yaw: f32::NAN,
+            pitch: 0.0,
+            roll: 0.0,
+            fov_deg: 0.0,
+            spin_deg_per_s: 0.0,
+        }),
+        600,
+    );
+    let seq = host.next();
+    e.feed(
+        &frame(&Message::SetView {
+            seq,
+            yaw: 0.0,
+            pitch: 0.0,
+            roll: 0.0,
+            fov_deg: 200.0,
+            spin_deg_per_s: 0.0,
+        }),
+        600,
+    );
+    assert_eq!(nacks(&answers(&mut e)), [NackCode::Invalid, NackCode::Invalid]);
+}
+
+#[test]
+fn levels_and_beam_settings() {
+    let v = Vol::demo(Demo::Sphere, 10, SampleType::U8);
+    let mut mem = big();
+    let mut e = engine(&mut mem);
+    let mut host = Host::new();
+    e.feed(&Host::hello(), 0);
+    let seq = host.next();
+    e.feed(&frame(&Message::SetLevels { seq, levels: Levels::from_slice(&[100.0]).unwrap() }), 0);
+    // A volume with no levels of its own takes them.
+    let none = Vol { levels: vec![], ..v.clone() };
+    e.feed(&host.begin(&none), 0);
+    e.feed(&host.slices(&none, MAX_CHUNK).concat(), 0);
+    e.feed(&host.end(), 0);
+    assert_eq!(fragments(e.surface().unwrap().commands()), batch(&Vol { levels: vec![100.0], ..v.clone() }));
+    e.update(0);
+    let samples_before = isoscope_core::beam::frame_stats(e.display().commands(), e.beam()).samples;
+    let seq = host.next();
+    e.feed(&frame(&Message::SetBeam { seq, lit_step: 4, dwell_us: 8, settle_us: 10 }), 1);
+    assert!(e.update(1));
+    assert_eq!(e.beam().lit_step, 4.0);
+    assert_eq!(e.beam().point_dwell, 8);
+    let samples_after = isoscope_core::beam::frame_stats(e.display().commands(), e.beam()).samples;
+    assert!(samples_after > 3 * samples_before, "{samples_before} -> {samples_after}");
+    let seq = host.next();
+    e.feed(&frame(&Message::SetBeam { seq, lit_step: 0, dwell_us: 1, settle_us: 1 }), 2);
+    let seq = host.next();
+    e.feed(&frame(&Message::SetLevels { seq, levels: Levels::new() }), 2);
+    assert_eq!(nacks(&answers(&mut e)), [NackCode::Invalid, NackCode::Invalid]);
+}
+
+#[test]
+fn a_surface_larger_than_memory_is_cut_and_counted() {
+    let v = Vol::demo(Demo::Gyroid, 16, SampleType::U8);
+    let mut mem = Mem::new(16 * 16, 16, 500);
+    let mut e = engine(&mut mem);
+    e.feed(&Host::new().volume(&v), 0);
+    let ev = events(&mut e);
+    let Some(Event::Committed { commands, dropped, .. }) =
+        ev.iter().find(|x| matches!(x, Event::Committed { .. })).copied()
+    else {
+        panic!("{ev:?}")
+    };
+    assert!(commands <= 500 && commands > 450, "{commands}");
+    assert!(dropped > 1000, "{dropped}");
+    e.update(0);
+    assert!(!e.display().is_empty());
+}
+
+#[test]
+fn nan_samples_are_skipped_and_counted() {
+    let mut v = Vol::demo(Demo::Sphere, 10, SampleType::F32);
+    v.bytes[4 * 555..4 * 556].copy_from_slice(&f32::NAN.to_le_bytes());
+    let mut mem = big();
+    let mut e = engine(&mut mem);
+    e.feed(&Host::new().volume(&v), 0);
+    let ev = events(&mut e);
+    assert!(ev.iter().any(|x| matches!(x, Event::Committed { nonfinite_cells: 12, .. })), "{ev:?}");
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+    /// Any damage to a valid stream: no panic, no hang, and a clean volume
+    /// afterwards shows exactly what it should.
+    #[test]
+    fn damaged_streams_never_panic_and_recovery_is_exact(
+        cuts in proptest::collection::vec((0usize..20_000, any::<u8>(), 0u8..4), 0..40),
+        noise in proptest::collection::vec(any::<u8>(), 0..3000),
+    ) {
+        let v = Vol::demo(Demo::Torus, 10, SampleType::U16);
+        let mut stream = Host::new().volume(&v);
+        for &(at, byte, how) in &cuts {
+            let at = at % (stream.len() + 1);
+            match how {
+                0 => { if at < stream.len() { stream[at] ^= byte | 1; } }
+                1 => stream.insert(at, byte),
+                2 => { if at < stream.len() { stream.remove(at); } }
+                _ => { stream.splice(at..at, noise.iter().copied().take(usize::from(byte))); }
+            }
+        }
+        let mut mem = Mem::new(10 * 10 * 2, 10, 20_000);
+        let mut e = engine(&mut mem);
+        for (k, c) in stream.chunks(97).enumerate() {
+            e.feed(c, k as u32 * 3);
+            let mut sink = [0u8; 64];
+            while e.transmit(&mut sink) > 0 {}
+            e.update(k as u32 * 3);
+        }
+        e.feed(&[0], 1_000_000);
+        e.feed(&Host::new().volume(&v), 1_000_000);
+        e.update(1_000_001);
+        prop_assert_eq!(fragments(e.surface().unwrap().commands()), batch(&v));
+    }
+}
