@@ -39,8 +39,9 @@ fn golden() -> Vec<(&'static str, Message<'static>, &'static str)> {
                 spacing: [1.0, 1.0, 2.5],
                 levels: Levels::from_slice(&[100.0, 1000.0]).unwrap(),
                 axes: AXIS_X | AXIS_Z,
+                every: 4,
             },
-            "090102014040ac02020103803f0103803f01042040020103c84201087a4405f608357000",
+            "090102014040ac02020103803f0103803f01042040020103c84201097a440504b549c18100",
         ),
         (
             "slice_data",
@@ -337,6 +338,7 @@ fn message(
             spacing: [f[0], f[1], f[2]],
             levels: lv,
             axes: c,
+            every: c,
         },
         3 => Message::SliceData { seq: a, slice: b as u16, offset: b, data },
         4 => Message::EndVolume { seq: a },

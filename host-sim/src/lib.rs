@@ -15,17 +15,25 @@
 //!   shows them (Gaussian spot, energy per sample, P31 green), to RGB and PNG.
 //! - [`animate`]: the surface turning on the simulated screen, as a looping
 //!   GIF or APNG.
+//! - [`link`]: the host side of the UART link: open a port, stream a
+//!   volume with a send window and retransmission, report the throughput.
+//! - [`device`]: the virtual board: the core's device engine behind a
+//!   pseudo-terminal or TCP port, at a real UART's line rate.
+//! - [`tty`]: raw serial ports and pseudo-terminals.
 //! - [`wav`]: the sample stream as a WAV file (X, Y and the beam) for a
 //!   DC-coupled sound card driving a real scope.
 
 pub mod animate;
 pub mod contour;
+pub mod device;
 pub mod formats;
 pub mod info;
+pub mod link;
 pub mod phosphor;
 pub mod progress;
 pub mod scene;
 pub mod svg;
+pub mod tty;
 pub mod virtual_dac;
 pub mod volume;
 pub mod wav;

@@ -58,6 +58,82 @@ enum Cmd {
     /// Render what the oscilloscope shows to a PNG: the frame's samples on a
     /// simulated P31 phosphor (beam spot, brightness from beam speed, glow).
     Render(RenderArgs),
+    /// Stream a volume to the board over a serial line (or to the virtual
+    /// board), slice by slice, with retransmission; print throughput and
+    /// payload efficiency as key=value lines.
+    Send(SendArgs),
+    /// Run the virtual board: the firmware's engine behind a pseudo-terminal
+    /// (or TCP port) at a real UART's line rate, one line per event, and a
+    /// PNG of the screen whenever it changes.
+    Device(DeviceArgs),
+}
+
+#[derive(Args, Debug)]
+struct SendArgs {
+    #[command(flatten)]
+    input: InputArgs,
+    /// The board's port: a serial device (/dev/ttyUSB0), the pseudo-terminal
+    /// `device --pty` printed, or tcp:HOST:PORT (`device --tcp`, QEMU).
+    #[arg(long)]
+    port: String,
+    /// Line rate in bit/s (8N1).
+    #[arg(long, default_value_t = 921_600)]
+    baud: u32,
+    /// Contour every N-th slice of each plane (the board does; 1 = all).
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    every: u8,
+    /// Frames in flight before waiting for acknowledgements.
+    #[arg(long, default_value_t = 8)]
+    window: usize,
+    /// Data bytes per chunk (at most 1024).
+    #[arg(long, default_value_t = isoscope_core::wire::MAX_CHUNK)]
+    chunk: usize,
+    /// Set the view first: yaw in degrees (the other angles default to the
+    /// default view's).
+    #[arg(long, allow_hyphen_values = true)]
+    yaw: Option<f32>,
+    /// Set the view first: pitch in degrees.
+    #[arg(long, allow_hyphen_values = true)]
+    pitch: Option<f32>,
+    /// Set the view first: roll in degrees.
+    #[arg(long, allow_hyphen_values = true)]
+    roll: Option<f32>,
+    /// Set the view first: perspective with this field of view.
+    #[arg(long, value_name = "FOV")]
+    perspective: Option<f32>,
+    /// Set the view first: spin about the vertical axis, degrees per second.
+    #[arg(long, allow_hyphen_values = true)]
+    spin: Option<f32>,
+}
+
+#[derive(Args, Debug)]
+struct DeviceArgs {
+    /// Serve on a new pseudo-terminal; its path is the first line printed.
+    #[arg(long, conflicts_with = "tcp", required_unless_present = "tcp")]
+    pty: bool,
+    /// Serve on a TCP address instead (127.0.0.1:0 picks a free port); the
+    /// address is the first line printed.
+    #[arg(long, value_name = "ADDR")]
+    tcp: Option<String>,
+    /// The UART's line rate (bit/s, 8N1): bytes are taken no faster; 0 takes
+    /// them as fast as they come.
+    #[arg(long, default_value_t = 921_600)]
+    baud: u32,
+    /// Rewrite this PNG whenever the picture changes.
+    #[arg(long, value_name = "FILE.png")]
+    snapshot: Option<PathBuf>,
+    /// Snapshot width and height in pixels.
+    #[arg(long, default_value_t = 512)]
+    size: u32,
+    /// Exit after this many volumes are shown.
+    #[arg(long, value_name = "N")]
+    exit_after: Option<u32>,
+    /// Largest slice the board takes, in bytes (nx * ny * sample size).
+    #[arg(long, default_value_t = 1 << 20)]
+    max_slice_bytes: usize,
+    /// Commands each surface holds, and points in the display list.
+    #[arg(long, default_value_t = 1 << 19)]
+    points: usize,
 }
 
 #[derive(Args, Debug)]
@@ -615,6 +691,96 @@ fn wav(args: &WavArgs) -> Result<()> {
     Ok(())
 }
 
+fn send(args: &SendArgs) -> Result<()> {
+    use isoscope_sim::link::{SendConfig, ViewSetting, WireVolume, open_port, send_volume};
+    let (vol, demo) = load(&args.input.source)?;
+    let levels = levels_for(&args.input.levels, demo, Some(&vol))?;
+    let axes = planes(&args.input.axes)?.iter().fold(0u8, |m, p| {
+        m | match p {
+            Plane::XY => isoscope_core::wire::AXIS_Z,
+            Plane::XZ => isoscope_core::wire::AXIS_Y,
+            Plane::YZ => isoscope_core::wire::AXIS_X,
+        }
+    });
+    let any_view = args.yaw.or(args.pitch).or(args.roll).or(args.perspective).or(args.spin).is_some();
+    let view = any_view.then(|| ViewSetting {
+        angles: [
+            args.yaw.unwrap_or(View::DEFAULT.yaw),
+            args.pitch.unwrap_or(View::DEFAULT.pitch),
+            args.roll.unwrap_or(View::DEFAULT.roll),
+        ],
+        fov_deg: args.perspective.unwrap_or(0.0),
+        spin_deg_per_s: args.spin.unwrap_or(0.0),
+    });
+    let wire = WireVolume::from_loaded(&vol)?;
+    let cfg = SendConfig {
+        levels,
+        axes,
+        every: args.every,
+        window: args.window,
+        chunk: args.chunk,
+        baud: args.baud,
+        view,
+        ..SendConfig::default()
+    };
+    let (reader, writer) = open_port(&args.port, args.baud)?;
+    let chunks_per_slice = wire.slice_bytes().div_ceil(cfg.chunk.max(1));
+    let total = 2 + chunks_per_slice * usize::from(wire.dims[2]) + usize::from(view.is_some());
+    let progress = Progress::new("sending frames", total);
+    let report = send_volume(reader, writer, &wire, &cfg, Some(&progress))?;
+    eprintln!(
+        "isoscope-sim: sent {}x{}x{} {:?} to {} ({:.1} KB/s, {:.1}% of the line rate)",
+        wire.dims[0],
+        wire.dims[1],
+        wire.dims[2],
+        wire.sample_type,
+        args.port,
+        report.throughput() / 1e3,
+        report.efficiency(args.baud) * 100.0
+    );
+    print!("{}", report.report(args.baud));
+    Ok(())
+}
+
+fn device(args: &DeviceArgs) -> Result<()> {
+    use isoscope_sim::device::{Board, DeviceOptions, HostBuffers, Stop};
+    let opts = DeviceOptions {
+        baud: args.baud,
+        snapshot: args.snapshot.clone(),
+        size: args.size,
+        exit_after: args.exit_after,
+        slice_bytes: args.max_slice_bytes,
+        points: args.points,
+        ..DeviceOptions::default()
+    };
+    let mut mem = HostBuffers::new(opts.slice_bytes, opts.extent, opts.points);
+    let mut board = Board::new(&mut mem, &opts)?;
+    let stdout = std::io::stdout();
+    let mut log = stdout.lock();
+    if let Some(addr) = &args.tcp {
+        let listener =
+            std::net::TcpListener::bind(addr).with_context(|| format!("cannot listen on {addr}"))?;
+        writeln!(log, "{}", listener.local_addr()?)?;
+        log.flush()?;
+        loop {
+            let (mut stream, peer) = listener.accept().context("accepting a connection")?;
+            stream.set_nodelay(true)?;
+            stream.set_nonblocking(true)?;
+            writeln!(log, "connected {peer}")?;
+            if board.serve(&mut stream, &opts, &mut log)? == Stop::Done {
+                return Ok(());
+            }
+            writeln!(log, "disconnected {peer}")?;
+        }
+    }
+    let pty = isoscope_sim::tty::open_pty()?;
+    writeln!(log, "{}", pty.path.display())?;
+    log.flush()?;
+    let mut master = &pty.master;
+    board.serve(&mut master, &opts, &mut log)?;
+    Ok(())
+}
+
 fn stats(args: &StatsArgs) -> Result<()> {
     let scene = build_scene(args, false)?;
     print!("{}", scene.report(args.beam.rate));
@@ -644,6 +810,8 @@ fn main() -> ExitCode {
         Cmd::Stats(a) => stats(a),
         Cmd::Render(a) => render(a),
         Cmd::Wav(a) => wav(a),
+        Cmd::Send(a) => send(a),
+        Cmd::Device(a) => device(a),
         Cmd::Info(a) => {
             load(&a.source).map(|(v, _)| print!("{}", isoscope_sim::info::summarize(&v, a.bins).report()))
         }

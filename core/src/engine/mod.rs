@@ -15,7 +15,10 @@
 //! - re-projects the surface when the view changes (no volume needed) and
 //!   builds the display list: project, cull, stitch, merge, order.
 //!
-//! What it answers is queued as bytes for the UART ([`Engine::transmit`]);
+//! What it answers is queued as bytes for the UART ([`Engine::transmit`]):
+//! an `Ack` or `Nack` for every command, and a `Status` once a new volume's
+//! picture is drawn (so the host can time "last slice to picture") or a
+//! transfer is abandoned;
 //! what happened is queued as [`Event`]s for a log ([`Engine::next_event`]).
 //!
 //! The caller owns the memory ([`Buffers`]; [`StaticBuffers`] holds it in
@@ -386,6 +389,8 @@ struct Device<'a> {
     levels: Levels,
     /// The display list must be rebuilt.
     dirty: bool,
+    /// A volume was committed: report the status once its picture is drawn.
+    status_due: bool,
     display_capacity: usize,
     refresh_centi_hz: u16,
     tx: Deque<u8, TX_QUEUE>,
@@ -446,6 +451,7 @@ impl<'a> Engine<'a> {
                 beam: cfg.beam,
                 levels: Levels::new(),
                 dirty: false,
+                status_due: false,
                 display_capacity,
                 refresh_centi_hz: 0,
                 tx: Deque::new(),
@@ -529,6 +535,9 @@ impl<'a> Engine<'a> {
             dropped: self.list.dropped().min(u64::from(u32::MAX)) as u32,
             refresh_centi_hz: dev.refresh_centi_hz,
         });
+        if core::mem::take(&mut dev.status_due) {
+            dev.status();
+        }
     }
 
     /// The display list on screen, in drawing order.
@@ -716,9 +725,6 @@ impl Device<'_> {
                 let answer = self.apply(msg, now_ms).err();
                 self.session.answered(seq, answer);
                 self.answer(seq, answer);
-                if matches!(msg, Message::EndVolume { .. }) {
-                    self.status();
-                }
             }
             Standing::Seen(answer) => {
                 self.counters.replays = self.counters.replays.wrapping_add(1);
@@ -735,10 +741,10 @@ impl Device<'_> {
     /// Apply the next command.
     fn apply(&mut self, msg: Message<'_>, now_ms: u32) -> Result<(), NackCode> {
         match msg {
-            Message::BeginVolume { dims, sample_type, spacing, levels, axes, .. } => {
+            Message::BeginVolume { dims, sample_type, spacing, levels, axes, every, .. } => {
                 self.abort(AbortReason::Superseded);
                 let levels = if levels.is_empty() { self.levels } else { levels };
-                let spec = VolumeSpec { dims, sample_type, spacing, levels, axes };
+                let spec = VolumeSpec { dims, sample_type, spacing, levels, axes, every: every.max(1) };
                 if self.cfg.sample_types & sample_type.bit() == 0 {
                     return Err(NackCode::Invalid);
                 }
@@ -764,6 +770,7 @@ impl Device<'_> {
                 self.front = 1 - self.front;
                 self.shown = Some(Shown { dims: t.spec.dims, spacing: t.spec.spacing });
                 self.dirty = true;
+                self.status_due = true;
                 self.counters.volumes = self.counters.volumes.wrapping_add(1);
                 let (commands, dropped) =
                     self.geometry.get(self.front).map_or((0, 0), |g| (g.len() as u32, g.dropped()));

@@ -30,6 +30,8 @@ pub struct VolumeSpec {
     /// Slicing planes: a set of [`AXIS_X`] (y-z slices), [`AXIS_Y`] (x-z
     /// slices) and [`AXIS_Z`] (x-y slices).
     pub axes: u8,
+    /// Contour every `every`-th slice of each plane (at least 1).
+    pub every: u8,
 }
 
 impl VolumeSpec {
@@ -191,7 +193,8 @@ impl<'a> Stream<'a> {
         };
         let mut sink = Keep(geometry);
         let zf = f32::from(z);
-        if spec.axes & AXIS_Z != 0 {
+        let every = usize::from(spec.every.max(1));
+        if spec.axes & AXIS_Z != 0 && usize::from(z) % every == 0 {
             // The x-y slice z, row pair by row pair.
             decode(ty, cur, 0, 1, lo.get_mut(..nx).unwrap_or(&mut []));
             for j in 0..ny - 1 {
@@ -207,7 +210,7 @@ impl<'a> Stream<'a> {
         let below = usize::from(z - 1);
         if spec.axes & AXIS_Y != 0 {
             // Row `z - 1` of subgrids of every x-z slice (one per y).
-            for j in 0..ny {
+            for j in (0..ny).step_by(every) {
                 decode(ty, prev, j * nx, 1, lo.get_mut(..nx).unwrap_or(&mut []));
                 decode(ty, cur, j * nx, 1, hi.get_mut(..nx).unwrap_or(&mut []));
                 let (l, h) = (lo.get(..nx).unwrap_or(&[]), hi.get(..nx).unwrap_or(&[]));
@@ -217,7 +220,7 @@ impl<'a> Stream<'a> {
         }
         if spec.axes & AXIS_X != 0 {
             // Row `z - 1` of subgrids of every y-z slice (one per x).
-            for i in 0..nx {
+            for i in (0..nx).step_by(every) {
                 decode(ty, prev, i, nx, lo.get_mut(..ny).unwrap_or(&mut []));
                 decode(ty, cur, i, nx, hi.get_mut(..ny).unwrap_or(&mut []));
                 let (l, h) = (lo.get(..ny).unwrap_or(&[]), hi.get(..ny).unwrap_or(&[]));

@@ -236,6 +236,9 @@ pub enum Message<'a> {
         levels: Levels,
         /// Bit set of [`AXIS_X`], [`AXIS_Y`], [`AXIS_Z`]: the slicing planes.
         axes: u8,
+        /// Contour every `every`-th slice of each plane (slices `0, every,
+        /// 2 * every, ...`); 1 (or 0) is every slice.
+        every: u8,
     },
     /// 3, host to MCU: a chunk of one z slice.
     SliceData {

@@ -1,0 +1,302 @@
+//! The virtual board: the core's device engine behind a pseudo-terminal or
+//! a TCP port, fed at the line rate of a real UART, drawing through the
+//! beam scheduler onto the simulated phosphor.
+
+use crate::phosphor::{Phosphor, PhosphorConfig};
+use anyhow::{Context, Result};
+use isoscope_core::beam::Scheduler;
+use isoscope_core::command::Point3;
+use isoscope_core::display::ScratchStore;
+use isoscope_core::engine::{Buffers, Engine, EngineConfig, Event};
+use isoscope_core::screen::ScreenPoint;
+use std::io::{ErrorKind, Read, Write};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// The engine's memory on the heap.
+#[derive(Debug, Clone)]
+pub struct HostBuffers {
+    slices: [Vec<u8>; 2],
+    rows: [Vec<f32>; 2],
+    points: [Vec<Point3>; 2],
+    kinds: [Vec<u8>; 2],
+    screen: Vec<ScreenPoint>,
+    flags: Vec<u8>,
+    index: [Vec<u32>; 4],
+    edges: Vec<u64>,
+    back: Vec<ScreenPoint>,
+    back_flags: Vec<u8>,
+}
+
+impl HostBuffers {
+    /// Room for slices of `slice_bytes`, rows of `extent` samples, and
+    /// `points` commands (surface) and points (display list).
+    pub fn new(slice_bytes: usize, extent: usize, points: usize) -> Self {
+        Self {
+            slices: [vec![0; slice_bytes], vec![0; slice_bytes]],
+            rows: [vec![0.0; extent], vec![0.0; extent]],
+            points: [vec![Point3::default(); points], vec![Point3::default(); points]],
+            kinds: [vec![0; points], vec![0; points]],
+            screen: vec![ScreenPoint::default(); points],
+            flags: vec![0; points],
+            index: std::array::from_fn(|_| vec![0; points]),
+            edges: vec![0; points],
+            back: vec![ScreenPoint::default(); points],
+            back_flags: vec![0; points],
+        }
+    }
+
+    /// The buffers, lent to an engine.
+    pub fn buffers(&mut self) -> Buffers<'_> {
+        let [s0, s1] = &mut self.slices;
+        let [r0, r1] = &mut self.rows;
+        let [p0, p1] = &mut self.points;
+        let [k0, k1] = &mut self.kinds;
+        let [a, b, c, d] = &mut self.index;
+        Buffers {
+            slices: [s0, s1],
+            rows: [r0, r1],
+            geometry: [(p0, k0), (p1, k1)],
+            screen: (&mut self.screen, &mut self.flags),
+            scratch: ScratchStore::with_storage(
+                a,
+                b,
+                c,
+                d,
+                &mut self.edges,
+                &mut self.back,
+                &mut self.back_flags,
+            ),
+        }
+    }
+}
+
+/// Line time the paced port may deliver at once after a pause (a DMA ring
+/// buffer's worth; it bounds how far the pacing can run ahead of the line).
+const BURST_SECONDS: f64 = 0.005;
+
+/// How the virtual board runs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DeviceOptions {
+    /// The UART's line rate: bytes are taken no faster than `baud / 10` a
+    /// second (8N1), as a real board receives them; 0 takes them at once.
+    pub baud: u32,
+    /// Rewrite this PNG whenever the picture changes.
+    pub snapshot: Option<PathBuf>,
+    /// The snapshot's width and height in pixels.
+    pub size: u32,
+    /// Stop after this many volumes are shown.
+    pub exit_after: Option<u32>,
+    /// The engine's settings.
+    pub engine: EngineConfig,
+    /// Largest slice in bytes.
+    pub slice_bytes: usize,
+    /// Largest row (x or y extent).
+    pub extent: usize,
+    /// Commands per surface and points in the display list.
+    pub points: usize,
+}
+
+impl Default for DeviceOptions {
+    fn default() -> Self {
+        Self {
+            baud: 921_600,
+            snapshot: None,
+            size: 512,
+            exit_after: None,
+            engine: EngineConfig::default(),
+            slice_bytes: 512 * 512 * 4,
+            extent: 4096,
+            points: 1 << 19,
+        }
+    }
+}
+
+/// What a run of the virtual board did.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct DeviceSummary {
+    /// Volumes shown.
+    pub volumes: u32,
+    /// The last picture's latency: from the bytes that completed the volume
+    /// to the display list ready, seconds.
+    pub last_latency: f64,
+}
+
+/// A byte stream that returns `WouldBlock` when nothing is waiting, and
+/// `Ok(0)` only when the other end has closed it.
+pub trait Port: Read + Write {}
+impl<T: Read + Write> Port for T {}
+
+/// Why [`Board::serve`] returned.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stop {
+    /// `exit_after` volumes were shown.
+    Done,
+    /// The other end closed the port (TCP); the board keeps its picture
+    /// for the next connection.
+    Closed,
+}
+
+/// The virtual board: the engine and its clock, across connections.
+#[derive(Debug)]
+pub struct Board<'a> {
+    engine: Engine<'a>,
+    start: Instant,
+    summary: DeviceSummary,
+    /// The feed that completed the last volume began here.
+    committed_at: Option<Instant>,
+    last_snapshot: Option<Instant>,
+}
+
+impl<'a> Board<'a> {
+    /// A board over `mem`.
+    ///
+    /// # Errors
+    /// Invalid engine settings or buffers.
+    pub fn new(mem: &'a mut HostBuffers, opts: &DeviceOptions) -> Result<Self> {
+        let engine = Engine::new(opts.engine, mem.buffers()).context("cannot start the engine")?;
+        Ok(Self {
+            engine,
+            start: Instant::now(),
+            summary: DeviceSummary::default(),
+            committed_at: None,
+            last_snapshot: None,
+        })
+    }
+
+    /// What the board did so far.
+    pub fn summary(&self) -> DeviceSummary {
+        self.summary
+    }
+
+    /// The engine.
+    pub fn engine(&self) -> &Engine<'a> {
+        &self.engine
+    }
+
+    /// Write the engine's queued answers to the port.
+    fn answer(&mut self, port: &mut dyn Port, out: &mut [u8]) -> Result<()> {
+        loop {
+            let n = self.engine.transmit(out);
+            if n == 0 {
+                return Ok(());
+            }
+            let mut rest = &out[..n];
+            while !rest.is_empty() {
+                match port.write(rest) {
+                    Ok(0) => anyhow::bail!("the port closed while writing"),
+                    Ok(k) => rest = &rest[k..],
+                    // A non-blocking port with its buffer full: the host is slow to read.
+                    Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::Interrupted) => {
+                        std::thread::sleep(Duration::from_micros(200));
+                    }
+                    Err(e) => return Err(e).context("writing the port"),
+                }
+            }
+            let _ = port.flush();
+        }
+    }
+
+    fn stamp(&self) -> String {
+        format!("t={:.3}", self.start.elapsed().as_secs_f64())
+    }
+
+    /// Serve `port` until `exit_after` volumes are shown in all or the port
+    /// closes. Event lines go to `log`.
+    ///
+    /// # Errors
+    /// The port fails, or a snapshot cannot be written.
+    pub fn serve(&mut self, port: &mut dyn Port, opts: &DeviceOptions, log: &mut dyn Write) -> Result<Stop> {
+        let start = self.start;
+        let ms = |t: Instant| t.duration_since(start).as_millis() as u32;
+        let mut buf = vec![0u8; 4096];
+        let mut out = vec![0u8; 4096];
+        let mut allowance = 0.0f64;
+        let mut last = Instant::now();
+        loop {
+            let now = Instant::now();
+            let budget = if opts.baud == 0 {
+                buf.len()
+            } else {
+                // A UART delivers baud/10 bytes a second (8N1), no faster.
+                allowance = (allowance
+                    + now.duration_since(last).as_secs_f64() * f64::from(opts.baud) / 10.0)
+                    .min(f64::from(opts.baud) / 10.0 * BURST_SECONDS);
+                allowance as usize
+            };
+            last = now;
+            let mut got = 0;
+            if budget > 0 {
+                match port.read(&mut buf[..budget]) {
+                    Ok(0) => return Ok(Stop::Closed),
+                    Ok(n) => got = n,
+                    Err(e)
+                        if matches!(
+                            e.kind(),
+                            ErrorKind::WouldBlock | ErrorKind::Interrupted | ErrorKind::TimedOut
+                        ) => {}
+                    Err(e) => return Err(e).context("reading the port"),
+                }
+            }
+            if got > 0 {
+                allowance -= got as f64;
+                let feed_start = Instant::now();
+                self.engine.feed(&buf[..got], ms(feed_start));
+                self.answer(port, &mut out)?;
+                while let Some(ev) = self.engine.next_event() {
+                    if matches!(ev, Event::Committed { .. }) {
+                        self.committed_at = Some(feed_start);
+                    }
+                    writeln!(log, "{} {ev}", self.stamp())?;
+                }
+                log.flush()?;
+            }
+            let redrawn = self.engine.update(ms(Instant::now()));
+            // A status follows a new picture, an abandoned transfer answers late.
+            self.answer(port, &mut out)?;
+            if redrawn {
+                let mut shown_volume = false;
+                while let Some(ev) = self.engine.next_event() {
+                    let mut line = format!("{} {ev}", self.stamp());
+                    if let (Event::Redrawn { .. }, Some(t)) = (ev, self.committed_at.take()) {
+                        self.summary.last_latency = t.elapsed().as_secs_f64();
+                        line.push_str(&format!(" latency_ms={:.1}", self.summary.last_latency * 1e3));
+                        self.summary.volumes += 1;
+                        shown_volume = true;
+                    }
+                    writeln!(log, "{line}")?;
+                }
+                // A spinning view redraws at every update: snapshot twice a second.
+                let due = shown_volume
+                    || self.last_snapshot.is_none_or(|t| t.elapsed() > Duration::from_millis(500));
+                if let (Some(path), true) = (&opts.snapshot, due) {
+                    snapshot(&self.engine, opts.size, path)?;
+                    self.last_snapshot = Some(Instant::now());
+                    if shown_volume {
+                        writeln!(log, "{} snapshot {}", self.stamp(), path.display())?;
+                    }
+                }
+                log.flush()?;
+                if opts.exit_after.is_some_and(|n| self.summary.volumes >= n) {
+                    return Ok(Stop::Done);
+                }
+            }
+            if got == 0 {
+                std::thread::sleep(Duration::from_micros(500));
+            }
+        }
+    }
+}
+
+/// Draw the engine's display list once on a fresh phosphor and write it.
+fn snapshot(engine: &Engine<'_>, size: u32, path: &Path) -> Result<()> {
+    let beam = *engine.beam();
+    let mut cfg = PhosphorConfig::with_size(size, size);
+    cfg.bits = beam.bits;
+    let mut screen = Phosphor::new(cfg).context("invalid picture settings")?;
+    screen.deposit(Scheduler::new(engine.display().commands(), &beam));
+    let tmp = path.with_extension("png.tmp");
+    screen.write_png(&tmp).with_context(|| format!("cannot write {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(())
+}

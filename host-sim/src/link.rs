@@ -1,0 +1,562 @@
+//! The host side of the UART link: open a serial port (a tty, a
+//! pseudo-terminal, or a TCP socket such as QEMU's serial chardev) and
+//! stream a volume to the board with a send window, go-back-N
+//! retransmission, and a report of throughput and payload efficiency.
+
+use crate::progress::Progress;
+use crate::volume::{Dims, LoadedVolume, Samples};
+use anyhow::{Context, Result, anyhow, bail};
+use isoscope_core::wire::{
+    DeviceState, FrameDecoder, Levels, MAX_CHUNK, Message, NackCode, PROTOCOL_VERSION, SampleType, WireError,
+    encode,
+};
+use std::io::{ErrorKind, Read, Write};
+use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// A volume as it goes on the wire: little-endian samples, z slice by z
+/// slice.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WireVolume {
+    /// Samples along x, y, z.
+    pub dims: [u16; 3],
+    /// The samples' type.
+    pub sample_type: SampleType,
+    /// Voxel spacing.
+    pub spacing: [f32; 3],
+    /// All samples, little-endian, x fastest.
+    pub bytes: Vec<u8>,
+}
+
+impl WireVolume {
+    /// The volume in its own sample type.
+    ///
+    /// # Errors
+    /// An extent above 65535.
+    pub fn from_loaded(v: &LoadedVolume) -> Result<Self> {
+        let Dims(nx, ny, nz) = v.dims;
+        let d = |n: usize, axis: &str| {
+            u16::try_from(n)
+                .map_err(|_| anyhow!("the volume has {n} samples along {axis}; the protocol takes 65535"))
+        };
+        let dims = [d(nx, "x")?, d(ny, "y")?, d(nz, "z")?];
+        let (sample_type, bytes) = match &v.samples {
+            Samples::U8(s) => (SampleType::U8, s.clone()),
+            Samples::U16(s) => (SampleType::U16, s.iter().flat_map(|x| x.to_le_bytes()).collect()),
+            Samples::I16(s) => (SampleType::I16, s.iter().flat_map(|x| x.to_le_bytes()).collect()),
+            Samples::F32(s) => (SampleType::F32, s.iter().flat_map(|x| x.to_le_bytes()).collect()),
+        };
+        Ok(Self { dims, sample_type, spacing: v.spacing, bytes })
+    }
+
+    /// Bytes in one z slice.
+    pub fn slice_bytes(&self) -> usize {
+        usize::from(self.dims[0]) * usize::from(self.dims[1]) * self.sample_type.size()
+    }
+}
+
+/// A view to set on the board before the volume.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ViewSetting {
+    /// Yaw, pitch, roll in degrees.
+    pub angles: [f32; 3],
+    /// Field of view (0: orthographic).
+    pub fov_deg: f32,
+    /// Spin, degrees per second.
+    pub spin_deg_per_s: f32,
+}
+
+/// How to send.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SendConfig {
+    /// Contour levels (at most 8).
+    pub levels: Vec<f32>,
+    /// Slicing planes: a set of `wire::AXIS_*` bits.
+    pub axes: u8,
+    /// Contour every `every`-th slice of each plane.
+    pub every: u8,
+    /// Frames in flight before waiting for acknowledgements.
+    pub window: usize,
+    /// Data bytes per chunk (at most [`MAX_CHUNK`]).
+    pub chunk: usize,
+    /// The line rate in bit/s (for the timeout and the efficiency).
+    pub baud: u32,
+    /// A view to set first.
+    pub view: Option<ViewSetting>,
+    /// Timeouts in a row before giving up.
+    pub max_timeouts: u32,
+}
+
+impl Default for SendConfig {
+    fn default() -> Self {
+        Self {
+            levels: Vec::new(),
+            axes: isoscope_core::wire::AXIS_X | isoscope_core::wire::AXIS_Y | isoscope_core::wire::AXIS_Z,
+            every: 1,
+            window: 8,
+            chunk: MAX_CHUNK,
+            baud: 921_600,
+            view: None,
+            max_timeouts: 8,
+        }
+    }
+}
+
+/// What the board said about itself.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BoardInfo {
+    /// Its firmware version.
+    pub firmware: [u8; 3],
+    /// The largest slice in bytes of `u8` samples.
+    pub max_slice_samples: u32,
+    /// Sample types it takes (bit set).
+    pub sample_types: u8,
+    /// Points its display list holds.
+    pub display_points: u32,
+}
+
+/// What a transfer did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SendReport {
+    /// The board.
+    pub board: BoardInfo,
+    /// Sample bytes delivered.
+    pub payload_bytes: u64,
+    /// Bytes written to the line (all frames, retransmissions included).
+    pub wire_bytes: u64,
+    /// Frames in the transfer.
+    pub frames: u64,
+    /// Frames sent again.
+    pub retransmitted: u64,
+    /// Nacks received, by code.
+    pub nacks: Vec<(NackCode, u32)>,
+    /// Timeouts (no acknowledgement in time).
+    pub timeouts: u32,
+    /// From the first frame of the volume to the last acknowledgement.
+    pub seconds: f64,
+    /// From writing `EndVolume` (right after the last slice) to its
+    /// acknowledgement.
+    pub end_ack_seconds: f64,
+    /// From writing `EndVolume` to the board's status report, which it sends
+    /// once the new picture is on screen (contoured, stitched, ordered).
+    pub picture_seconds: Option<f64>,
+    /// The board's status after the volume.
+    pub status: Option<(DeviceState, u32, u16)>,
+}
+
+impl SendReport {
+    /// Payload bytes per second.
+    pub fn throughput(&self) -> f64 {
+        self.payload_bytes as f64 / self.seconds.max(1e-9)
+    }
+
+    /// Payload throughput as a share of the line rate (8N1: 10 bits a byte).
+    pub fn efficiency(&self, baud: u32) -> f64 {
+        self.throughput() * 10.0 / f64::from(baud.max(1))
+    }
+
+    /// The report as `key=value` lines.
+    pub fn report(&self, baud: u32) -> String {
+        let mut s = String::new();
+        let mut kv = |k: &str, v: String| s.push_str(&format!("{k}={v}\n"));
+        kv("payload_bytes", self.payload_bytes.to_string());
+        kv("wire_bytes", self.wire_bytes.to_string());
+        kv("frames", self.frames.to_string());
+        kv("retransmitted_frames", self.retransmitted.to_string());
+        kv("timeouts", self.timeouts.to_string());
+        let nacks: Vec<String> = self.nacks.iter().map(|(c, n)| format!("{c:?}:{n}")).collect();
+        kv("nacks", if nacks.is_empty() { "0".into() } else { nacks.join(",") });
+        kv("seconds", format!("{:.3}", self.seconds));
+        kv("throughput_bytes_per_s", format!("{:.0}", self.throughput()));
+        kv("line_rate_bytes_per_s", format!("{:.0}", f64::from(baud) / 10.0));
+        kv("payload_efficiency", format!("{:.4}", self.efficiency(baud)));
+        kv("end_to_ack_ms", format!("{:.1}", self.end_ack_seconds * 1e3));
+        if let Some(p) = self.picture_seconds {
+            kv("last_slice_to_picture_ms", format!("{:.1}", p * 1e3));
+        }
+        if let Some((state, points, centi_hz)) = self.status {
+            kv("board_state", format!("{state:?}"));
+            kv("board_points", points.to_string());
+            kv("board_refresh_hz", format!("{:.2}", f64::from(centi_hz) / 100.0));
+        }
+        s
+    }
+}
+
+/// A message from the board, owned.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Reply {
+    Msg(OwnedReply),
+    Bad(WireError),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum OwnedReply {
+    Hello { protocol: u8, firmware: [u8; 3] },
+    Capabilities { max_slice_samples: u32, sample_types: u8, display_points: u32 },
+    Ack(u16),
+    Nack(u16, NackCode),
+    Status { state: DeviceState, points: u32, refresh_centi_hz: u16 },
+    Other,
+}
+
+/// Reads the board's frames on a thread.
+struct Listener {
+    rx: Receiver<Reply>,
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl Listener {
+    fn start<R: Read + Send + 'static>(mut reader: R) -> Self {
+        let (tx, rx) = mpsc::channel();
+        let stop = Arc::new(AtomicBool::new(false));
+        let halt = stop.clone();
+        let thread = std::thread::spawn(move || {
+            let mut dec = FrameDecoder::<512>::new();
+            let mut buf = [0u8; 4096];
+            while !halt.load(Ordering::Relaxed) {
+                let n = match reader.read(&mut buf) {
+                    Ok(0) => {
+                        std::thread::sleep(Duration::from_millis(2));
+                        continue;
+                    }
+                    Ok(n) => n,
+                    Err(e)
+                        if matches!(
+                            e.kind(),
+                            ErrorKind::WouldBlock | ErrorKind::TimedOut | ErrorKind::Interrupted
+                        ) =>
+                    {
+                        continue;
+                    }
+                    Err(_) => return,
+                };
+                for &b in &buf[..n] {
+                    let Some(r) = dec.push(b) else { continue };
+                    let reply = match r {
+                        Err(e) => Reply::Bad(e),
+                        Ok(m) => Reply::Msg(match m {
+                            Message::Hello { protocol, firmware } => OwnedReply::Hello { protocol, firmware },
+                            Message::Capabilities {
+                                max_slice_samples, sample_types, display_points, ..
+                            } => OwnedReply::Capabilities { max_slice_samples, sample_types, display_points },
+                            Message::Ack { seq } => OwnedReply::Ack(seq),
+                            Message::Nack { seq, code } => OwnedReply::Nack(seq, code),
+                            Message::Status { state, points, refresh_centi_hz, .. } => {
+                                OwnedReply::Status { state, points, refresh_centi_hz }
+                            }
+                            _ => OwnedReply::Other,
+                        }),
+                    };
+                    if tx.send(reply).is_err() {
+                        return;
+                    }
+                }
+            }
+        });
+        Self { rx, stop, thread: Some(thread) }
+    }
+}
+
+impl Drop for Listener {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+fn frame(msg: &Message<'_>) -> Result<Vec<u8>> {
+    let mut buf = vec![0u8; isoscope_core::wire::MAX_FRAME_LEN];
+    Ok(encode(msg, &mut buf).map_err(|e| anyhow!("cannot encode {msg:?}: {e}"))?.to_vec())
+}
+
+/// Say hello and read the board's capabilities (three tries).
+fn handshake(w: &mut impl Write, l: &Listener) -> Result<BoardInfo> {
+    let mut hello = vec![0u8]; // flush a partial frame in the board
+    hello.extend(frame(&Message::Hello { protocol: PROTOCOL_VERSION, firmware: crate_version() })?);
+    for _ in 0..3 {
+        w.write_all(&hello).context("cannot write to the port")?;
+        w.flush()?;
+        let deadline = Instant::now() + Duration::from_millis(1500);
+        let mut firmware = None;
+        while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+            match l.rx.recv_timeout(left) {
+                Ok(Reply::Msg(OwnedReply::Hello { protocol, firmware: f })) => {
+                    if protocol != PROTOCOL_VERSION {
+                        bail!(
+                            "the board speaks protocol version {protocol}; this sender speaks {PROTOCOL_VERSION}"
+                        );
+                    }
+                    firmware = Some(f);
+                }
+                Ok(Reply::Msg(OwnedReply::Capabilities {
+                    max_slice_samples,
+                    sample_types,
+                    display_points,
+                })) => {
+                    return Ok(BoardInfo {
+                        firmware: firmware.unwrap_or_default(),
+                        max_slice_samples,
+                        sample_types,
+                        display_points,
+                    });
+                }
+                Ok(_) => {}
+                Err(RecvTimeoutError::Timeout) => break,
+                Err(RecvTimeoutError::Disconnected) => bail!("the port closed"),
+            }
+        }
+    }
+    bail!("no answer from the board (is it connected, and is this its port and baud rate?)")
+}
+
+fn crate_version() -> [u8; 3] {
+    let mut v = env!("CARGO_PKG_VERSION").split('.').map(|x| x.parse().unwrap_or(0));
+    [v.next().unwrap_or(0), v.next().unwrap_or(0), v.next().unwrap_or(0)]
+}
+
+/// Stream `vol` to the board behind `reader`/`writer`.
+///
+/// # Errors
+/// No answer, a volume the board cannot take, or a refused command.
+pub fn send_volume<R, W>(
+    reader: R,
+    mut writer: W,
+    vol: &WireVolume,
+    cfg: &SendConfig,
+    progress: Option<&Progress>,
+) -> Result<SendReport>
+where
+    R: Read + Send + 'static,
+    W: Write,
+{
+    let levels = Levels::from_slice(&cfg.levels)
+        .with_context(|| format!("at most {} levels go to the board", isoscope_core::wire::MAX_LEVELS))?;
+    if cfg.chunk == 0 || cfg.chunk > MAX_CHUNK {
+        bail!("the chunk size must be 1..={MAX_CHUNK} bytes");
+    }
+    let listener = Listener::start(reader);
+    let board = handshake(&mut writer, &listener)?;
+    if board.sample_types & vol.sample_type.bit() == 0 {
+        bail!("the board does not take {:?} samples", vol.sample_type);
+    }
+    if vol.slice_bytes() as u64 > u64::from(board.max_slice_samples) {
+        bail!(
+            "a {}x{} slice of {:?} is {} bytes; the board holds {} (send a smaller or resampled volume)",
+            vol.dims[0],
+            vol.dims[1],
+            vol.sample_type,
+            vol.slice_bytes(),
+            board.max_slice_samples
+        );
+    }
+    // Every command frame, in order, with consecutive sequence numbers.
+    let seq0 = (Instant::now().elapsed().subsec_nanos() as u16) ^ 0x5A5A;
+    let mut frames: Vec<Vec<u8>> = Vec::new();
+    let seq = |k: usize| seq0.wrapping_add(k as u16);
+    if let Some(v) = cfg.view {
+        let [yaw, pitch, roll] = v.angles;
+        frames.push(frame(&Message::SetView {
+            seq: seq(frames.len()),
+            yaw,
+            pitch,
+            roll,
+            fov_deg: v.fov_deg,
+            spin_deg_per_s: v.spin_deg_per_s,
+        })?);
+    }
+    frames.push(frame(&Message::BeginVolume {
+        seq: seq(frames.len()),
+        dims: vol.dims,
+        sample_type: vol.sample_type,
+        spacing: vol.spacing,
+        levels,
+        axes: cfg.axes,
+        every: cfg.every,
+    })?);
+    let slice_bytes = vol.slice_bytes();
+    for (z, slice) in vol.bytes.chunks(slice_bytes.max(1)).enumerate() {
+        for (k, data) in slice.chunks(cfg.chunk).enumerate() {
+            frames.push(frame(&Message::SliceData {
+                seq: seq(frames.len()),
+                slice: z as u16,
+                offset: (k * cfg.chunk) as u32,
+                data,
+            })?);
+        }
+    }
+    frames.push(frame(&Message::EndVolume { seq: seq(frames.len()) })?);
+    let n = frames.len();
+    let window = cfg.window.max(1);
+    // Round trip allowance: a window of frames on the line, and time for
+    // the board to contour a slice.
+    let line_s =
+        (frames.iter().take(window).map(Vec::len).sum::<usize>() * 10) as f64 / f64::from(cfg.baud.max(1));
+    let timeout = Duration::from_secs_f64(0.5 + 2.0 * line_s);
+
+    let mut report = SendReport {
+        board,
+        payload_bytes: vol.bytes.len() as u64,
+        wire_bytes: 0,
+        frames: n as u64,
+        retransmitted: 0,
+        nacks: Vec::new(),
+        timeouts: 0,
+        seconds: 0.0,
+        end_ack_seconds: 0.0,
+        picture_seconds: None,
+        status: None,
+    };
+    let mut acked = vec![false; n];
+    let mut sent_epoch = vec![0u32; n];
+    let mut ever_sent = vec![false; n];
+    let (mut base, mut next, mut epoch) = (0usize, 0usize, 0u32);
+    let mut timeouts_in_row = 0;
+    let mut end_sent_at = None;
+    let t0 = Instant::now();
+    while base < n {
+        while next < n && next < base + window {
+            writer.write_all(&frames[next]).context("cannot write to the port")?;
+            report.wire_bytes += frames[next].len() as u64;
+            if ever_sent[next] {
+                report.retransmitted += 1;
+            }
+            ever_sent[next] = true;
+            sent_epoch[next] = epoch;
+            if next == n - 1 {
+                end_sent_at = Some(Instant::now());
+            }
+            next += 1;
+        }
+        writer.flush()?;
+        match listener.rx.recv_timeout(timeout) {
+            Ok(Reply::Msg(OwnedReply::Ack(s))) => {
+                timeouts_in_row = 0;
+                let rel = usize::from(s.wrapping_sub(seq(base)));
+                if rel < window && base + rel < n {
+                    acked[base + rel] = true;
+                }
+                while base < n && acked[base] {
+                    base += 1;
+                    if let Some(p) = progress {
+                        p.inc();
+                    }
+                }
+            }
+            Ok(Reply::Msg(OwnedReply::Nack(s, code))) => {
+                timeouts_in_row = 0;
+                match report.nacks.iter_mut().find(|(c, _)| *c == code) {
+                    Some((_, k)) => *k += 1,
+                    None => report.nacks.push((code, 1)),
+                }
+                let rel = usize::from(s.wrapping_sub(seq(base)));
+                let idx = (rel < window && base + rel < n).then_some(base + rel);
+                match code {
+                    // It has it already (a retransmission crossed an ack).
+                    NackCode::Duplicate => {
+                        if let Some(i) = idx {
+                            acked[i] = true;
+                        }
+                        while base < n && acked[base] {
+                            base += 1;
+                        }
+                    }
+                    // Lost or damaged on the line: go back to the oldest
+                    // unacknowledged frame, once per loss.
+                    NackCode::OutOfOrder
+                    | NackCode::BadCrc
+                    | NackCode::Truncated
+                    | NackCode::UnknownMessage
+                    | NackCode::Busy => {
+                        let stale = idx.is_some_and(|i| sent_epoch[i] != epoch);
+                        if !stale && next > base {
+                            epoch += 1;
+                            next = base;
+                        }
+                    }
+                    NackCode::Oversize => {
+                        bail!("the board's frame buffer is smaller than {} data bytes", cfg.chunk)
+                    }
+                    NackCode::BadVersion => {
+                        bail!("the board does not speak protocol version {PROTOCOL_VERSION}")
+                    }
+                    NackCode::DimsOverCapacity => bail!(
+                        "the board cannot hold a {}x{} slice (its largest: {} bytes)",
+                        vol.dims[0],
+                        vol.dims[1],
+                        board.max_slice_samples
+                    ),
+                    NackCode::Invalid => {
+                        bail!("the board refused command {s} as invalid (levels, planes, view?)")
+                    }
+                    NackCode::Missing | NackCode::Aborted => {
+                        bail!("the board abandoned the transfer ({code:?}); the old picture stays")
+                    }
+                }
+            }
+            Ok(Reply::Msg(OwnedReply::Status { state, points, refresh_centi_hz })) => {
+                report.status = Some((state, points, refresh_centi_hz));
+            }
+            Ok(_) => {}
+            Err(RecvTimeoutError::Timeout) => {
+                report.timeouts += 1;
+                timeouts_in_row += 1;
+                if timeouts_in_row > cfg.max_timeouts {
+                    bail!("the board stopped answering ({} timeouts in a row)", timeouts_in_row);
+                }
+                epoch += 1;
+                next = base;
+            }
+            Err(RecvTimeoutError::Disconnected) => bail!("the port closed"),
+        }
+    }
+    report.seconds = t0.elapsed().as_secs_f64();
+    report.end_ack_seconds = end_sent_at.map_or(0.0, |t| t.elapsed().as_secs_f64());
+    // The board reports its status once the new picture is drawn.
+    report.status = None;
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while report.status.is_none() {
+        let Some(left) = deadline.checked_duration_since(Instant::now()) else { break };
+        match listener.rx.recv_timeout(left) {
+            Ok(Reply::Msg(OwnedReply::Status { state, points, refresh_centi_hz })) => {
+                report.status = Some((state, points, refresh_centi_hz));
+                report.picture_seconds = end_sent_at.map(|t| t.elapsed().as_secs_f64());
+            }
+            Ok(_) => {}
+            Err(_) => break,
+        }
+    }
+    Ok(report)
+}
+
+/// A port to the board: a serial device or pseudo-terminal path, set raw at
+/// `baud`, or `tcp:HOST:PORT`. Returns a reader (with a short read timeout)
+/// and a writer.
+///
+/// # Errors
+/// The port cannot be opened or set up.
+pub fn open_port(spec: &str, baud: u32) -> Result<(Box<dyn Read + Send>, Box<dyn Write + Send>)> {
+    if let Some(addr) = spec.strip_prefix("tcp:") {
+        let s = std::net::TcpStream::connect(addr).with_context(|| format!("cannot connect to {addr}"))?;
+        s.set_nodelay(true)?;
+        s.set_read_timeout(Some(Duration::from_millis(50)))?;
+        let r = s.try_clone()?;
+        return Ok((Box::new(r), Box::new(s)));
+    }
+    let path = Path::new(spec);
+    let f = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(path)
+        .with_context(|| format!("cannot open the serial port {}", path.display()))?;
+    crate::tty::make_raw(&f, baud).with_context(|| format!("cannot set up {}", path.display()))?;
+    let r = f.try_clone()?;
+    Ok((Box::new(r), Box::new(f)))
+}

@@ -1,0 +1,231 @@
+//! The UART link end to end: the real sender against the virtual board, over
+//! a pseudo-terminal (both as child processes), and over an in-process line
+//! that loses and corrupts frames.
+
+use isoscope_core::command::{Command, Point3};
+use isoscope_core::demo::Demo;
+use isoscope_core::engine::{Engine, EngineConfig};
+use isoscope_core::grid::{Planes, Volume};
+use isoscope_core::surface::{SliceId, SurfaceSink, contour_volume};
+use isoscope_core::trace::Traversal;
+use isoscope_sim::device::HostBuffers;
+use isoscope_sim::link::{SendConfig, WireVolume, send_volume};
+use isoscope_sim::volume::{DemoSpec, LoadedVolume};
+use std::convert::Infallible;
+use std::io::{BufRead, BufReader, ErrorKind, Read, Write};
+use std::process::{Command as Process, Stdio};
+use std::sync::mpsc::{Receiver, Sender, channel};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+fn bin() -> &'static str {
+    env!("CARGO_BIN_EXE_isoscope-sim")
+}
+
+type Frag = Vec<[u32; 3]>;
+
+fn fragments(cmds: impl Iterator<Item = Command<Point3>>) -> Vec<Frag> {
+    let mut out: Vec<Frag> = Vec::new();
+    for c in cmds {
+        let p = c.point();
+        let key = [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+        match c {
+            Command::MoveTo(_) | Command::Point(_) => out.push(vec![key]),
+            Command::LineTo(_) => out.last_mut().unwrap().push(key),
+        }
+    }
+    out.sort();
+    out
+}
+
+struct Keep(Vec<Command<Point3>>);
+impl SurfaceSink for Keep {
+    type Error = Infallible;
+    fn command(&mut self, _: SliceId, _: usize, c: Command<Point3>) -> Result<(), Infallible> {
+        self.0.push(c);
+        Ok(())
+    }
+}
+
+fn demo(n: usize) -> (LoadedVolume, Vec<f32>) {
+    let v = LoadedVolume::demo(DemoSpec { demo: Demo::Hydrogen, n }).unwrap();
+    let mut values = vec![0.0; n * n * n];
+    Demo::Hydrogen.fill(n, &mut values).unwrap();
+    (v, values)
+}
+
+/// The board side of an in-process line: every byte the host writes goes
+/// through `damage`, then to the engine; its answers come back through a
+/// channel, also damaged.
+struct Line {
+    engine: Arc<Mutex<Engine<'static>>>,
+    answers: Sender<Vec<u8>>,
+    rng: u64,
+    /// One in `corrupt` bytes towards the board is flipped.
+    corrupt: u64,
+    /// One in `lose` answer batches is lost.
+    lose: u64,
+    bytes: u64,
+}
+
+impl Line {
+    fn next(&mut self) -> u64 {
+        self.rng ^= self.rng << 13;
+        self.rng ^= self.rng >> 7;
+        self.rng ^= self.rng << 17;
+        self.rng
+    }
+}
+
+impl Write for Line {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let mut data = buf.to_vec();
+        for b in &mut data {
+            if self.next() % self.corrupt == 0 {
+                *b ^= 0x10;
+            }
+        }
+        self.bytes += data.len() as u64;
+        let mut e = self.engine.lock().unwrap();
+        let now = (self.bytes / 92) as u32; // the clock of a 921600-baud line
+        e.feed(&data, now);
+        e.update(now);
+        let mut out = vec![0u8; 4096];
+        let n = e.transmit(&mut out);
+        drop(e);
+        if n > 0 && self.next() % self.lose != 0 {
+            let _ = self.answers.send(out[..n].to_vec());
+        }
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// The host's end of the answers.
+struct Answers(Receiver<Vec<u8>>, Vec<u8>);
+
+impl Read for Answers {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        if self.1.is_empty() {
+            match self.0.recv_timeout(Duration::from_millis(20)) {
+                Ok(v) => self.1 = v,
+                Err(_) => return Err(ErrorKind::WouldBlock.into()),
+            }
+        }
+        let n = buf.len().min(self.1.len());
+        buf[..n].copy_from_slice(&self.1[..n]);
+        self.1.drain(..n);
+        Ok(n)
+    }
+}
+
+#[test]
+fn a_lossy_line_delivers_the_exact_surface_by_retransmission() {
+    let (vol, values) = demo(20);
+    let mem: &'static mut HostBuffers = Box::leak(Box::new(HostBuffers::new(20 * 20 * 4, 64, 100_000)));
+    let engine = Arc::new(Mutex::new(Engine::new(EngineConfig::default(), mem.buffers()).unwrap()));
+    let (tx, rx) = channel();
+    let line = Line {
+        engine: engine.clone(),
+        answers: tx,
+        rng: 0x9E37_79B9_7F4A_7C15,
+        corrupt: 9000,
+        lose: 12,
+        bytes: 0,
+    };
+    let wire = WireVolume::from_loaded(&vol).unwrap();
+    let cfg = SendConfig { levels: vec![0.1], chunk: 200, window: 6, ..SendConfig::default() };
+    let report = send_volume(Answers(rx, Vec::new()), line, &wire, &cfg, None).unwrap();
+    assert!(report.retransmitted > 0, "the line lost nothing? {report:?}");
+    assert!(
+        report.nacks.iter().any(|(c, _)| matches!(
+            c,
+            isoscope_core::wire::NackCode::BadCrc
+                | isoscope_core::wire::NackCode::Truncated
+                | isoscope_core::wire::NackCode::OutOfOrder
+        )),
+        "{report:?}"
+    );
+    let e = engine.lock().unwrap();
+    let got = fragments(e.surface().expect("a picture").commands());
+    let volume = Volume::new(&values, 20, 20, 20).unwrap();
+    let mut keep = Keep(Vec::new());
+    contour_volume(&volume, Planes::ALL, &[0.1], Traversal::Corrected, &mut keep).unwrap();
+    assert_eq!(got, fragments(keep.0.into_iter()));
+}
+
+#[test]
+fn send_to_the_virtual_board_over_a_pty_and_snapshot_the_screen() {
+    let dir = std::env::temp_dir().join(format!("isoscope-link-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let snap = dir.join("screen.png");
+    let mut device = Process::new(bin())
+        .args(["device", "--pty", "--exit-after", "1", "--size", "256", "--snapshot"])
+        .arg(&snap)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(device.stdout.take().unwrap()).lines();
+    let pty = lines.next().unwrap().unwrap();
+    assert!(pty.starts_with("/dev/"), "first line is the pty: {pty}");
+    let sent = Process::new(bin())
+        .args(["send", "--demo", "hydrogen:16", "--port", &pty, "--baud", "921600"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&sent.stdout);
+    assert!(sent.status.success(), "send failed: {}", String::from_utf8_lossy(&sent.stderr));
+    for key in
+        ["payload_efficiency=", "retransmitted_frames=0", "board_state=Showing", "last_slice_to_picture_ms="]
+    {
+        assert!(stdout.contains(key), "no {key} in\n{stdout}");
+    }
+    let log: Vec<String> = lines.map(Result::unwrap).collect();
+    assert!(device.wait().unwrap().success());
+    let find = |word: &str| log.iter().any(|l| l.split_whitespace().nth(1) == Some(word));
+    for word in ["hello", "begun", "committed", "redrawn", "snapshot"] {
+        assert!(find(word), "no `{word}` event in {log:#?}");
+    }
+    // The screen shows the same picture `render` draws for that volume.
+    let want = dir.join("render.png");
+    let r = Process::new(bin())
+        .args(["render", "--demo", "hydrogen:16", "--size", "256", "-o"])
+        .arg(&want)
+        .output()
+        .unwrap();
+    assert!(r.status.success());
+    let (a, b) = (gray(&snap), gray(&want));
+    let lit = |img: &[u8]| img.iter().filter(|&&v| v > 64).count();
+    assert!(lit(&a) > 500, "the snapshot is dark");
+    let diff: f64 = a.iter().zip(&b).map(|(&x, &y)| f64::from(x.abs_diff(y))).sum::<f64>() / a.len() as f64;
+    assert!(diff < 2.0, "snapshot and render differ by {diff} grey levels a pixel");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A PNG's green channel.
+fn gray(path: &std::path::Path) -> Vec<u8> {
+    let dec = png::Decoder::new(std::fs::File::open(path).unwrap());
+    let mut r = dec.read_info().unwrap();
+    let mut buf = vec![0; r.output_buffer_size()];
+    let info = r.next_frame(&mut buf).unwrap();
+    let ch = info.color_type.samples();
+    buf[..info.buffer_size()].chunks(ch).map(|p| p[1.min(ch - 1)]).collect()
+}
+
+#[test]
+fn send_reports_plain_errors() {
+    let out = Process::new(bin())
+        .args(["send", "--demo", "sphere:8", "--port", "/nonexistent/tty"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("isoscope-sim: error: cannot open the serial port /nonexistent/tty"), "{err}");
+    let out =
+        Process::new(bin()).args(["send", "--demo", "sphere:8", "--port", "/dev/null"]).output().unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("not a serial port"), "{err}");
+}
