@@ -3,9 +3,10 @@
 //! beam scheduler onto the simulated phosphor.
 
 use crate::phosphor::{Phosphor, PhosphorConfig};
+use crate::virtual_dac::VirtualDac;
 use anyhow::{Context, Result};
-use isoscope_core::beam::Scheduler;
 use isoscope_core::command::Point3;
+use isoscope_core::dac::{Beam, Dac};
 use isoscope_core::display::ScratchStore;
 use isoscope_core::engine::{Buffers, Engine, EngineConfig, Event};
 use isoscope_core::screen::ScreenPoint;
@@ -85,6 +86,9 @@ pub struct DeviceOptions {
     pub snapshot: Option<PathBuf>,
     /// The snapshot's width and height in pixels.
     pub size: u32,
+    /// Rewrite this text file with one frame's DAC samples (`x y beam`)
+    /// whenever the picture changes.
+    pub samples: Option<PathBuf>,
     /// Stop after this many volumes are shown.
     pub exit_after: Option<u32>,
     /// The engine's settings.
@@ -103,6 +107,7 @@ impl Default for DeviceOptions {
             baud: 921_600,
             snapshot: None,
             size: 512,
+            samples: None,
             exit_after: None,
             engine: EngineConfig::default(),
             slice_bytes: 512 * 512 * 4,
@@ -269,6 +274,10 @@ impl<'a> Board<'a> {
                 // A spinning view redraws at every update: snapshot twice a second.
                 let due = shown_volume
                     || self.last_snapshot.is_none_or(|t| t.elapsed() > Duration::from_millis(500));
+                if let (Some(path), true) = (&opts.samples, shown_volume) {
+                    write_samples(&play_frame(&self.engine, 1e6), path)?;
+                    writeln!(log, "{} samples {}", self.stamp(), path.display())?;
+                }
                 if let (Some(path), true) = (&opts.snapshot, due) {
                     snapshot(&self.engine, opts.size, path)?;
                     self.last_snapshot = Some(Instant::now());
@@ -288,13 +297,34 @@ impl<'a> Board<'a> {
     }
 }
 
-/// Draw the engine's display list once on a fresh phosphor and write it.
+/// One frame of the board's picture, played into the virtual DAC.
+pub fn play_frame(engine: &Engine<'_>, rate_hz: f64) -> VirtualDac {
+    let mut dac = VirtualDac::new(rate_hz);
+    let Ok(()) = dac.write(engine.frame());
+    dac
+}
+
+/// Write a frame's samples as text: `x y beam` (beam 1 lit, 0 blanked), one
+/// sample a line.
+///
+/// # Errors
+/// The file cannot be written.
+pub fn write_samples(dac: &VirtualDac, path: &Path) -> Result<()> {
+    let mut text = String::with_capacity(dac.samples().len() * 12);
+    for s in dac.samples() {
+        text.push_str(&format!("{} {} {}\n", s.x, s.y, u8::from(s.beam == Beam::On)));
+    }
+    std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Draw one frame of the board's picture from the virtual DAC on a fresh
+/// phosphor and write it.
 fn snapshot(engine: &Engine<'_>, size: u32, path: &Path) -> Result<()> {
     let beam = *engine.beam();
     let mut cfg = PhosphorConfig::with_size(size, size);
     cfg.bits = beam.bits;
     let mut screen = Phosphor::new(cfg).context("invalid picture settings")?;
-    screen.deposit(Scheduler::new(engine.display().commands(), &beam));
+    screen.deposit(play_frame(engine, 1e6).samples().iter().copied());
     let tmp = path.with_extension("png.tmp");
     screen.write_png(&tmp).with_context(|| format!("cannot write {}", tmp.display()))?;
     std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))?;

@@ -125,6 +125,10 @@ struct DeviceArgs {
     /// Snapshot width and height in pixels.
     #[arg(long, default_value_t = 512)]
     size: u32,
+    /// Write one frame's DAC samples (`x y beam` lines) to this file
+    /// whenever a new volume is shown.
+    #[arg(long, value_name = "FILE")]
+    samples: Option<PathBuf>,
     /// Exit after this many volumes are shown.
     #[arg(long, value_name = "N")]
     exit_after: Option<u32>,
@@ -748,6 +752,7 @@ fn device(args: &DeviceArgs) -> Result<()> {
         baud: args.baud,
         snapshot: args.snapshot.clone(),
         size: args.size,
+        samples: args.samples.clone(),
         exit_after: args.exit_after,
         slice_bytes: args.max_slice_bytes,
         points: args.points,

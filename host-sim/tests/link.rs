@@ -161,9 +161,12 @@ fn send_to_the_virtual_board_over_a_pty_and_snapshot_the_screen() {
     let dir = std::env::temp_dir().join(format!("isoscope-link-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let snap = dir.join("screen.png");
+    let samples = dir.join("frame.txt");
     let mut device = Process::new(bin())
         .args(["device", "--pty", "--exit-after", "1", "--size", "256", "--snapshot"])
         .arg(&snap)
+        .arg("--samples")
+        .arg(&samples)
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
         .spawn()
@@ -185,9 +188,21 @@ fn send_to_the_virtual_board_over_a_pty_and_snapshot_the_screen() {
     let log: Vec<String> = lines.map(Result::unwrap).collect();
     assert!(device.wait().unwrap().success());
     let find = |word: &str| log.iter().any(|l| l.split_whitespace().nth(1) == Some(word));
-    for word in ["hello", "begun", "committed", "redrawn", "snapshot"] {
+    for word in ["hello", "begun", "committed", "redrawn", "snapshot", "samples"] {
         assert!(find(word), "no `{word}` event in {log:#?}");
     }
+    // One frame of DAC samples: from the park corner back to it, blanked.
+    let frame: Vec<[u16; 3]> = std::fs::read_to_string(&samples)
+        .unwrap()
+        .lines()
+        .map(|l| {
+            let v: Vec<u16> = l.split(' ').map(|x| x.parse().unwrap()).collect();
+            [v[0], v[1], v[2]]
+        })
+        .collect();
+    assert!(frame.len() > 1000, "{} samples", frame.len());
+    assert_eq!(frame.last(), Some(&[0, 0, 0]));
+    assert!(frame.iter().filter(|s| s[2] == 1).count() > frame.len() / 2);
     // The screen shows the same picture `render` draws for that volume.
     let want = dir.join("render.png");
     let r = Process::new(bin())

@@ -35,8 +35,8 @@ pub use geometry::Geometry;
 pub use session::REPLAY;
 pub use stream::VolumeSpec;
 
-use crate::beam::{BeamConfig, BeamConfigError, frame_stats};
-use crate::command::Point3;
+use crate::beam::{BeamConfig, BeamConfigError, Scheduler, frame_stats};
+use crate::command::{Command, Point3};
 use crate::display::{DisplayStore, OptimizeConfig, OrderConfig, ScratchStore};
 use crate::screen::ScreenPoint;
 use crate::view::{Bounds, Projection, View, ViewError, ViewTransform};
@@ -543,6 +543,15 @@ impl<'a> Engine<'a> {
     /// The display list on screen, in drawing order.
     pub fn display(&self) -> &ScreenList<'a> {
         &self.list
+    }
+
+    /// One frame of the picture as the board plays it: the beam schedule of
+    /// the display list, from the park position back to it (blanked). The
+    /// board plays it over and over, and the park position between frames
+    /// when there is nothing to show. Every board (the firmware, the
+    /// simulator's virtual board) plays exactly these samples.
+    pub fn frame(&self) -> Scheduler<impl Iterator<Item = Command<ScreenPoint>> + '_> {
+        Scheduler::new(self.list.commands(), &self.dev.beam)
     }
 
     /// Counts up each time the display list is rebuilt.
