@@ -1,0 +1,472 @@
+//! Everything specific to the board: the STM32F407G-DISC1 (STM32F407VG,
+//! Cortex-M4F at 168 MHz, 8 MHz crystal), and QEMU's netduinoplus2 (an
+//! STM32F405 with the same DAC, GPIO and USART registers) under the `qemu`
+//! feature.
+//!
+//! | signal | pin | peripheral |
+//! |---|---|---|
+//! | X | PA4 | DAC channel 1 (12 bits, output buffer on) |
+//! | Y | PA5 | DAC channel 2 |
+//! | blank (Z) | PB0 | GPIO, high = blanked (feature `blank-active-low` inverts) |
+//! | host link (later) | PA2 TX, PA3 RX | USART2 |
+//!
+//! # Output path
+//!
+//! X and Y change together and the blank pin switches on the same sample
+//! clock: **one timer, TIM8, paces everything**. At every TIM8 update event
+//! (1 MS/s: 168 MHz / 168):
+//!
+//! - TIM8's TRGO (MMS = update) triggers both DAC channels (TSEL = 001,
+//!   TEN1 = TEN2 = 1): each moves its holding register to its output at the
+//!   same APB1 clock edge. The DAC then raises a DMA request (DMAEN1 only),
+//!   and DMA1 stream 5 channel 7 (DAC1) writes the next 32-bit word of the
+//!   X/Y buffer into the dual register DHR12RD (X in bits 0..12, Y in bits
+//!   16..28): one write, both channels.
+//! - TIM8's update DMA request (UDE) makes DMA2 stream 1 channel 7
+//!   (TIM8_UP) write the next word of the blank buffer into GPIOB's BSRR.
+//!   It has to be DMA2: DMA1's peripheral port only reaches APB1, not the
+//!   AHB1 GPIO ports (RM0090, figure 1 and section 10.3.3).
+//!
+//! Both streams are circular over buffers of the same length and advance by
+//! one word per update event, so they stay in lockstep. The DAC outputs at
+//! event `k` the word loaded after event `k - 1`, while the GPIO takes word
+//! `k` at event `k`; so the blank buffer holds each sample's beam one slot
+//! later than the X/Y buffer holds its position ([`DmaOutput::fill`]), and a
+//! sample's position and beam reach the pins at the same update event.
+//!
+//! TIM6 (the usual DAC trigger) has no DMA request on DMA2 and cannot be a
+//! slave of anything, so it could only pace the blank pin through a second,
+//! synchronised timer; TIM8 is both a DAC trigger and a DMA2 request, which
+//! makes the common clock a matter of construction rather than of set-up.
+//!
+//! The buffers are double-buffered halves: the DMA1 stream 5 half- and
+//! full-transfer interrupts tell the main loop which half to refill from
+//! the beam scheduler. A transfer error parks and blanks the beam and stops
+//! feeding the independent watchdog, which then resets the MCU.
+//!
+//! # Under QEMU (feature `qemu`)
+//!
+//! QEMU models neither the RCC (reads return 0, so the HAL's clock freeze
+//! would wait forever: it is not called) nor the DAC, DMA, GPIO or TIM6-8
+//! (it logs every access with `-d unimp`). The CPU writes each sample
+//! itself, in the same order and format: DHR12RD, then the blank pin's
+//! BSRR.
+
+use isoscope_core::dac::{Beam, Sample};
+use stm32f4xx_hal::gpio::{Analog, Output, PinState, PushPull, gpioa, gpiob};
+use stm32f4xx_hal::pac;
+use stm32f4xx_hal::prelude::*;
+use stm32f4xx_hal::watchdog::IndependentWatchdog;
+
+/// Samples per second (both DAC channels and the blank pin).
+pub const SAMPLE_RATE_HZ: u32 = 1_000_000;
+
+/// The blank pin's number on its port (PB0).
+pub const BLANK_PIN: u32 = 0;
+
+/// True when a high blank pin blanks the beam.
+pub const BLANK_ACTIVE_HIGH: bool = !cfg!(feature = "blank-active-low");
+
+/// Samples in one half of the double buffer: 512 us at 1 MS/s.
+#[cfg(not(feature = "qemu"))]
+pub const HALF: usize = 512;
+
+/// The DHR12RD word of a sample: X (channel 1) in bits 0..12, Y (channel 2)
+/// in bits 16..28.
+#[inline(always)]
+pub const fn dac_word(s: Sample) -> u32 {
+    ((s.y as u32 & 0xfff) << 16) | (s.x as u32 & 0xfff)
+}
+
+/// The BSRR word that puts the blank pin in `beam`'s state: the pin's set
+/// bit (bit `n`) or reset bit (bit `n + 16`).
+#[inline(always)]
+pub const fn blank_word(beam: Beam) -> u32 {
+    let high = matches!(beam, Beam::Off) == BLANK_ACTIVE_HIGH;
+    if high { 1 << BLANK_PIN } else { 1 << (BLANK_PIN + 16) }
+}
+
+/// DAC_CR: channel enable, trigger enable, DMA enable (channel 1 bits;
+/// channel 2's are 16 higher), and TSEL = 001 (TIM8 TRGO) for channel 1.
+const DAC_EN1: u32 = 1 << 0;
+#[cfg(not(feature = "qemu"))]
+const DAC_TEN1: u32 = 1 << 2;
+#[cfg(not(feature = "qemu"))]
+const DAC_TSEL1_TIM8: u32 = 0b001 << 3;
+#[cfg(not(feature = "qemu"))]
+const DAC_DMAEN1: u32 = 1 << 12;
+const DAC_CH2: u32 = 16;
+
+/// The board's peripherals, set up.
+pub struct Board {
+    /// The X/Y DAC and the blank pin.
+    pub out: Out,
+    /// The independent watchdog (started by [`init`]).
+    pub watchdog: IndependentWatchdog,
+    /// Core clock, Hz.
+    pub sysclk_hz: u32,
+}
+
+/// The output pins; owning them keeps anyone else from reconfiguring them.
+pub struct Pins {
+    _x: gpioa::PA4<Analog>,
+    _y: gpioa::PA5<Analog>,
+    _blank: gpiob::PB0<Output<PushPull>>,
+}
+
+/// Set up clocks, pins, the DAC (beam parked and blanked) and the
+/// watchdog (`watchdog_ms`).
+pub fn init(watchdog_ms: u32) -> Board {
+    let Some(dp) = pac::Peripherals::take() else { fault() };
+    // QEMU does not model the RCC: its reads return 0, so waiting for the
+    // HSE or the PLL to be ready would never end; it runs the core at the
+    // reset clock and needs no bus clocks.
+    #[cfg(feature = "qemu")]
+    let mut rcc = dp.RCC.constrain();
+    #[cfg(not(feature = "qemu"))]
+    let mut rcc = dp
+        .RCC
+        .freeze(stm32f4xx_hal::rcc::Config::hse(8.MHz()).sysclk(168.MHz()).pclk1(42.MHz()).pclk2(84.MHz()));
+    let sysclk_hz = rcc.clocks.sysclk().raw();
+    rcc.apb1enr().modify(|_, w| w.dacen().set_bit());
+    #[cfg(not(feature = "qemu"))]
+    rcc.apb2enr().modify(|_, w| w.tim8en().set_bit());
+    #[cfg(not(feature = "qemu"))]
+    rcc.ahb1enr().modify(|_, w| w.dma1en().set_bit().dma2en().set_bit());
+
+    let gpioa = dp.GPIOA.split(&mut rcc);
+    let gpiob = dp.GPIOB.split(&mut rcc);
+    // The blank pin goes to its blanked level before it becomes an output.
+    let blanked = if BLANK_ACTIVE_HIGH { PinState::High } else { PinState::Low };
+    let pins = Pins {
+        _x: gpioa.pa4.into_analog(),
+        _y: gpioa.pa5.into_analog(),
+        _blank: gpiob.pb0.into_push_pull_output_in_state(blanked),
+    };
+
+    let mut watchdog = IndependentWatchdog::new(dp.IWDG);
+    // Halted by a debugger (probe-rs), the watchdog waits too.
+    watchdog.stop_on_debug(&dp.DBGMCU, true);
+    watchdog.start(watchdog_ms.millis());
+
+    let out = Out::new(dp.DAC, pins, rcc.clocks.timclk2().raw());
+    #[cfg(not(feature = "qemu"))]
+    let out = out.with_dma(dp.TIM8, dp.DMA1, dp.DMA2);
+    Board { out, watchdog, sysclk_hz }
+}
+
+/// The X/Y DAC and the blank pin.
+pub struct Out {
+    dac: pac::DAC,
+    park: Sample,
+    #[cfg_attr(feature = "qemu", allow(dead_code))]
+    timer_hz: u32,
+    _pins: Pins,
+    #[cfg(not(feature = "qemu"))]
+    dma: Option<(pac::TIM8, pac::DMA1, pac::DMA2)>,
+}
+
+impl Out {
+    fn new(dac: pac::DAC, pins: Pins, timer_hz: u32) -> Self {
+        // Both channels on, output buffers on, no trigger: a CPU write to
+        // the holding register reaches the output one APB1 clock later.
+        dac.cr().write(|w| unsafe { w.bits(DAC_EN1 | (DAC_EN1 << DAC_CH2)) });
+        Self {
+            dac,
+            park: Sample::default(),
+            timer_hz,
+            _pins: pins,
+            #[cfg(not(feature = "qemu"))]
+            dma: None,
+        }
+    }
+
+    #[cfg(not(feature = "qemu"))]
+    fn with_dma(mut self, tim8: pac::TIM8, dma1: pac::DMA1, dma2: pac::DMA2) -> Self {
+        self.dma = Some((tim8, dma1, dma2));
+        self
+    }
+
+    /// Where the beam rests when idle (blanked).
+    pub fn set_park(&mut self, park: Sample) {
+        self.park = Sample { beam: Beam::Off, ..park };
+    }
+
+    /// Write one sample from the CPU, in the output path's order: X and Y
+    /// together (DHR12RD), then the blank pin (BSRR).
+    #[inline(always)]
+    pub fn write(&mut self, s: Sample) {
+        self.dac.dhr12rd().write(|w| unsafe { w.bits(dac_word(s)) });
+        gpiob_bsrr().write(|w| unsafe { w.bits(blank_word(s.beam)) });
+    }
+
+    /// Park and blank the beam (from the CPU).
+    pub fn park(&mut self) {
+        self.write(self.park);
+    }
+}
+
+/// GPIOB's BSRR (the blank pin's port).
+fn gpiob_bsrr() -> &'static pac::gpiob::BSRR {
+    // SAFETY: BSRR writes are atomic set/reset operations on single pins;
+    // the blank pin is owned by `Out` (through `Pins`), and nothing else
+    // writes its bits.
+    unsafe { (*pac::GPIOB::ptr()).bsrr() }
+}
+
+/// Park and blank the beam whatever state the peripherals are in: stop the
+/// sample clock and both DMA streams, detach the DAC from its trigger and
+/// write the corner `(0, 0)` from the CPU, blank the pin. For fault
+/// handlers.
+pub fn emergency_park() {
+    // SAFETY: called when normal operation has ended (a fault); only
+    // disables and writes registers, never relies on their state.
+    let dp = unsafe { pac::Peripherals::steal() };
+    dp.TIM8.cr1().write(|w| unsafe { w.bits(0) });
+    dp.DMA1.st(5).cr().modify(|_, w| w.en().clear_bit());
+    dp.DMA2.st(1).cr().modify(|_, w| w.en().clear_bit());
+    dp.DAC.cr().write(|w| unsafe { w.bits(DAC_EN1 | (DAC_EN1 << DAC_CH2)) });
+    dp.DAC.dhr12rd().write(|w| unsafe { w.bits(0) });
+    gpiob_bsrr().write(|w| unsafe { w.bits(blank_word(Beam::Off)) });
+}
+
+/// The end after a fault: park and blank, then (under QEMU) exit with a
+/// failure, or (on the board) wait for the watchdog to reset the MCU.
+pub fn fault() -> ! {
+    emergency_park();
+    #[cfg(feature = "qemu")]
+    exit(false);
+    #[cfg(not(feature = "qemu"))]
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
+
+/// Leave QEMU through semihosting, with exit status 0 or 1.
+#[cfg(feature = "qemu")]
+pub fn exit(success: bool) -> ! {
+    use cortex_m_semihosting::debug;
+    debug::exit(if success { debug::EXIT_SUCCESS } else { debug::EXIT_FAILURE });
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
+
+#[cfg(not(feature = "qemu"))]
+mod dma {
+    //! The DMA output path (see the module docs of `board`).
+
+    use super::{
+        DAC_CH2, DAC_DMAEN1, DAC_EN1, DAC_TEN1, DAC_TSEL1_TIM8, HALF, Out, SAMPLE_RATE_HZ, blank_word,
+        dac_word, pac,
+    };
+    use core::cell::UnsafeCell;
+    use core::sync::atomic::{AtomicU8, AtomicU32, Ordering, compiler_fence};
+    use isoscope_core::dac::{Beam, Sample};
+    use stm32f4xx_hal::interrupt;
+
+    /// A DMA buffer: the CPU writes one half while the DMA reads the other.
+    #[repr(C, align(4))]
+    struct DmaBuf(UnsafeCell<[u32; 2 * HALF]>);
+
+    // SAFETY: accessed only through raw pointers, by `Streaming` (one
+    // instance) on halves the DMA is not reading.
+    unsafe impl Sync for DmaBuf {}
+
+    static XY: DmaBuf = DmaBuf(UnsafeCell::new([0; 2 * HALF]));
+    static BLANK: DmaBuf = DmaBuf(UnsafeCell::new([0; 2 * HALF]));
+
+    /// Halves the DMA has finished with (bit 0: first, bit 1: second), set
+    /// by the interrupt, cleared by the main loop as it refills them.
+    static FREE: AtomicU8 = AtomicU8::new(0);
+    /// Set by the interrupt on a DMA transfer error.
+    static ERROR: AtomicU8 = AtomicU8::new(0);
+    /// Halves the interrupt found still unfilled (the main loop was late).
+    static LATE: AtomicU32 = AtomicU32::new(0);
+
+    // DMA1 HISR/HIFCR bits of stream 5.
+    const S5_TE: u32 = 1 << 9;
+    const S5_HT: u32 = 1 << 10;
+    const S5_TC: u32 = 1 << 11;
+    const S5_ALL: u32 = 0b11_1101 << 6;
+    // DMA2 LISR/LIFCR bits of stream 1.
+    const S1_TE: u32 = 1 << 9;
+    const S1_ALL: u32 = 0b11_1101 << 6;
+
+    /// The running output: the DMA streams play the buffers, the main loop
+    /// refills them.
+    pub struct Streaming {
+        out: Out,
+        /// The beam of the last sample written (the blank buffer runs one
+        /// slot behind the X/Y buffer).
+        last_beam: Beam,
+    }
+
+    impl Out {
+        /// Prefill the whole double buffer from `samples`, then start the
+        /// sample clock.
+        pub fn start(mut self, samples: &mut impl Iterator<Item = Sample>) -> Streaming {
+            // The first update event outputs the DAC's current holding
+            // register: the park sample.
+            self.park();
+            let mut st = Streaming { out: self, last_beam: Beam::Off };
+            st.fill(0, samples);
+            st.fill(1, samples);
+            st.arm();
+            st
+        }
+    }
+
+    impl Streaming {
+        /// Write `HALF` samples into half `half` of both buffers: sample `j`'s
+        /// position at slot `j` of the X/Y buffer, the beam of sample `j - 1`
+        /// at slot `j` of the blank buffer.
+        fn fill(&mut self, half: usize, samples: &mut impl Iterator<Item = Sample>) {
+            let park = self.out.park;
+            let xy = XY.0.get().cast::<u32>();
+            let blank = BLANK.0.get().cast::<u32>();
+            for slot in half * HALF..(half + 1) * HALF {
+                let s = samples.next().unwrap_or(park);
+                // SAFETY: `slot < 2 * HALF`; the DMA is not reading this half.
+                unsafe {
+                    xy.add(slot).write_volatile(dac_word(s));
+                    blank.add(slot).write_volatile(blank_word(self.last_beam));
+                }
+                self.last_beam = s.beam;
+            }
+            compiler_fence(Ordering::SeqCst);
+        }
+
+        /// Configure TIM8, the DAC trigger and both DMA streams, and start.
+        fn arm(&mut self) {
+            let Some((tim8, dma1, dma2)) = self.out.dma.as_ref() else { super::fault() };
+            let dac = &self.out.dac;
+            // TIM8: update event at SAMPLE_RATE_HZ, as TRGO and as a DMA request.
+            let arr = (self.out.timer_hz / SAMPLE_RATE_HZ).saturating_sub(1);
+            tim8.cr1().write(|w| unsafe { w.bits(0) });
+            tim8.psc().write(|w| unsafe { w.bits(0) });
+            tim8.arr().write(|w| unsafe { w.bits(arr) });
+            tim8.cr2().write(|w| unsafe { w.mms().bits(0b010) });
+            tim8.dier().write(|w| w.ude().set_bit());
+
+            // DMA1 stream 5, channel 7 (DAC1): X/Y buffer -> DHR12RD.
+            let s5 = dma1.st(5);
+            s5.cr().write(|w| unsafe { w.bits(0) });
+            while s5.cr().read().en().bit_is_set() {}
+            dma1.hifcr().write(|w| unsafe { w.bits(S5_ALL) });
+            s5.par().write(|w| unsafe { w.bits(dac.dhr12rd().as_ptr() as u32) });
+            s5.m0ar().write(|w| unsafe { w.bits(XY.0.get() as u32) });
+            s5.ndtr().write(|w| unsafe { w.bits(2 * HALF as u32) });
+            s5.cr().write(|w| unsafe {
+                w.chsel().bits(7);
+                w.pl().very_high();
+                w.msize().bits32();
+                w.psize().bits32();
+                w.minc().incremented();
+                w.circ().enabled();
+                w.dir().memory_to_peripheral();
+                w.htie().enabled();
+                w.tcie().enabled();
+                w.teie().enabled()
+            });
+
+            // DMA2 stream 1, channel 7 (TIM8_UP): blank buffer -> GPIOB BSRR.
+            let s1 = dma2.st(1);
+            s1.cr().write(|w| unsafe { w.bits(0) });
+            while s1.cr().read().en().bit_is_set() {}
+            dma2.lifcr().write(|w| unsafe { w.bits(S1_ALL) });
+            s1.par().write(|w| unsafe { w.bits(super::gpiob_bsrr().as_ptr() as u32) });
+            s1.m0ar().write(|w| unsafe { w.bits(BLANK.0.get() as u32) });
+            s1.ndtr().write(|w| unsafe { w.bits(2 * HALF as u32) });
+            s1.cr().write(|w| unsafe {
+                w.chsel().bits(7);
+                w.pl().very_high();
+                w.msize().bits32();
+                w.psize().bits32();
+                w.minc().incremented();
+                w.circ().enabled();
+                w.dir().memory_to_peripheral();
+                w.teie().enabled()
+            });
+
+            // DAC: both channels triggered by TIM8 TRGO, DMA request on
+            // channel 1 only (one DHR12RD word serves both).
+            let trig = DAC_EN1 | DAC_TEN1 | DAC_TSEL1_TIM8;
+            dac.cr().write(|w| unsafe { w.bits(trig | DAC_DMAEN1 | (trig << DAC_CH2)) });
+
+            FREE.store(0, Ordering::SeqCst);
+            s1.cr().modify(|_, w| w.en().enabled());
+            s5.cr().modify(|_, w| w.en().enabled());
+            // SAFETY: the handlers only touch the statics above and the
+            // DMA flags; unmasking cannot break a critical section here.
+            unsafe {
+                cortex_m::peripheral::NVIC::unmask(pac::Interrupt::DMA1_STREAM5);
+                cortex_m::peripheral::NVIC::unmask(pac::Interrupt::DMA2_STREAM1);
+            }
+            tim8.cr1().write(|w| w.cen().set_bit());
+        }
+
+        /// Wait for a free half and refill it from `samples`. Returns false
+        /// after a DMA error (the beam is then parked and blanked).
+        pub fn refill(&mut self, samples: &mut impl Iterator<Item = Sample>) -> bool {
+            let half = loop {
+                if ERROR.load(Ordering::SeqCst) != 0 {
+                    super::emergency_park();
+                    return false;
+                }
+                let free = cortex_m::interrupt::free(|_| {
+                    let free = FREE.load(Ordering::SeqCst);
+                    if free == 0 {
+                        // Sleeps until an interrupt is pending, even while
+                        // masked here: no wake-up is lost.
+                        cortex_m::asm::wfi();
+                    }
+                    free
+                });
+                if free & 1 != 0 {
+                    break 0;
+                }
+                if free & 2 != 0 {
+                    break 1;
+                }
+            };
+            self.fill(half, samples);
+            FREE.fetch_and(!(1 << half), Ordering::SeqCst);
+            true
+        }
+
+        /// Halves refilled too late so far.
+        pub fn late(&self) -> u32 {
+            LATE.load(Ordering::Relaxed)
+        }
+    }
+
+    #[interrupt]
+    fn DMA1_STREAM5() {
+        // SAFETY: reads the status and writes the clear register only.
+        let dma1 = unsafe { &*pac::DMA1::ptr() };
+        let flags = dma1.hisr().read().bits();
+        dma1.hifcr().write(|w| unsafe { w.bits(flags & S5_ALL) });
+        if flags & S5_TE != 0 {
+            ERROR.store(1, Ordering::SeqCst);
+        }
+        for (flag, half) in [(S5_HT, 1u8), (S5_TC, 2u8)] {
+            if flags & flag != 0 && FREE.fetch_or(half, Ordering::SeqCst) & half != 0 {
+                LATE.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }
+
+    #[interrupt]
+    fn DMA2_STREAM1() {
+        // SAFETY: reads the status and writes the clear register only.
+        let dma2 = unsafe { &*pac::DMA2::ptr() };
+        let flags = dma2.lisr().read().bits() & S1_ALL;
+        dma2.lifcr().write(|w| unsafe { w.bits(flags) });
+        // Only the transfer error interrupt is enabled on this stream (the
+        // other flags are set all the same, and cleared here).
+        if flags & S1_TE != 0 {
+            ERROR.store(2, Ordering::SeqCst);
+        }
+    }
+}
