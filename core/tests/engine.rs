@@ -799,3 +799,42 @@ proptest! {
         prop_assert_eq!(fragments(e.surface().unwrap().commands()), batch(&v));
     }
 }
+
+#[test]
+fn frames_play_on_while_the_next_volume_streams_in() {
+    let a = Vol::demo(Demo::Torus, 12, SampleType::U8);
+    let b = Vol::demo(Demo::Sphere, 12, SampleType::U8);
+    let mut mem = big();
+    let mut e = engine(&mut mem);
+    e.feed(&Host::new().volume(&a), 0);
+    e.update(0);
+    let want: Vec<_> = e.frame().collect();
+    assert!(want.len() > 100);
+    let bytes = Host::new().volume(&b);
+    let mut played = Vec::new();
+    {
+        let (mut link, screen) = e.split();
+        let mut frame = screen.frame();
+        // A few samples, a few bytes: the DMA refill and the UART interleave.
+        let mut chunks = bytes.chunks(bytes.len() / want.len() + 1);
+        loop {
+            let s: Vec<_> = frame.by_ref().take(1).collect();
+            if let Some(c) = chunks.next() {
+                link.feed(c, 5);
+            }
+            if s.is_empty() {
+                break;
+            }
+            played.extend(s);
+        }
+        for c in chunks {
+            link.feed(c, 5);
+        }
+        assert!(link.pending() > 0, "answers wait for the UART");
+    }
+    assert_eq!(played, want, "the frame on screen is untouched while the next volume arrives");
+    assert!(e.update(6));
+    let next: Vec<_> = e.frame().collect();
+    assert_ne!(next, want);
+    assert_eq!(fragments(e.surface().unwrap().commands()), batch(&b));
+}

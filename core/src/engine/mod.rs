@@ -408,6 +408,38 @@ pub struct Engine<'a> {
     generation: u32,
 }
 
+/// The picture half of an [`Engine`] ([`Engine::split`]): the display list
+/// and the beam settings it is played with.
+#[derive(Debug, Clone, Copy)]
+pub struct Screen<'e, 'a> {
+    list: &'e ScreenList<'a>,
+    beam: BeamConfig,
+}
+
+impl<'e> Screen<'e, '_> {
+    /// One frame, as [`Engine::frame`].
+    pub fn frame(&self) -> Scheduler<impl Iterator<Item = Command<ScreenPoint>> + 'e> {
+        frame(self.list, &self.beam)
+    }
+
+    /// The display list.
+    pub fn display(&self) -> &'e ScreenList<'_> {
+        self.list
+    }
+
+    /// The beam settings.
+    pub fn beam(&self) -> &BeamConfig {
+        &self.beam
+    }
+}
+
+fn frame<'e>(
+    list: &'e ScreenList<'_>,
+    beam: &BeamConfig,
+) -> Scheduler<impl Iterator<Item = Command<ScreenPoint>> + 'e> {
+    Scheduler::new(list.commands(), beam)
+}
+
 /// The receiving half of an [`Engine`] ([`Engine::split`]): feeding bytes
 /// while the display list is being drawn.
 #[derive(Debug)]
@@ -464,10 +496,12 @@ impl<'a> Engine<'a> {
         })
     }
 
-    /// The receiving half and the display list, borrowed apart, so that the
-    /// beam can draw the list while bytes are fed.
-    pub fn split(&mut self) -> (Link<'_, 'a>, &ScreenList<'a>) {
-        (Link { decoder: &mut self.decoder, dev: &mut self.dev }, &self.list)
+    /// The receiving half and the picture, borrowed apart, so that the beam
+    /// can play frames while bytes are fed. What the bytes change (a new
+    /// volume, view or beam) shows after the next [`Engine::update`].
+    pub fn split(&mut self) -> (Link<'_, 'a>, Screen<'_, 'a>) {
+        let beam = self.dev.beam;
+        (Link { decoder: &mut self.decoder, dev: &mut self.dev }, Screen { list: &self.list, beam })
     }
 
     /// Take received bytes at time `now_ms`: see [`Link::feed`].
@@ -551,7 +585,7 @@ impl<'a> Engine<'a> {
     /// when there is nothing to show. Every board (the firmware, the
     /// simulator's virtual board) plays exactly these samples.
     pub fn frame(&self) -> Scheduler<impl Iterator<Item = Command<ScreenPoint>> + '_> {
-        Scheduler::new(self.list.commands(), &self.dev.beam)
+        frame(&self.list, &self.dev.beam)
     }
 
     /// Counts up each time the display list is rebuilt.
