@@ -7,7 +7,7 @@
 
 use isoscope_core::wire::{
     AXIS_X, AXIS_Z, DeviceState, Feed, FrameDecoder, Levels, Message, NackCode, SampleType, WireError, crc32,
-    encode, max_frame_len,
+    decode_frame, encode, max_frame_len,
 };
 use proptest::prelude::*;
 
@@ -402,4 +402,13 @@ proptest! {
     fn mostly_nonzero_noise_never_panics(bytes in prop::collection::vec(prop::sample::select(vec![0u8, 1, 2, 3, 0x7F, 0xFE, 0xFF]), 0..2048)) {
         let _ = decode_all(&mut FrameDecoder::<300>::new(), &bytes);
     }
+}
+
+#[test]
+fn a_zero_inside_a_cobs_block_is_bad_cobs() {
+    // `Hello { protocol: 0, firmware: [1, 2, 3] }` with a valid CRC, but its
+    // zero byte sent raw inside an 11-byte block instead of COBS-encoded.
+    let mut frame = hex("0b010000010203092b63d0");
+    assert_eq!(decode_frame(&mut frame), Err(WireError::BadCobs));
+    assert_eq!(isoscope_core::wire::cobs_decode_in_place(&mut hex("0301000a")), Err(WireError::BadCobs));
 }

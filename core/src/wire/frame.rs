@@ -132,8 +132,8 @@ pub fn encode<'b>(msg: &Message<'_>, buf: &'b mut [u8]) -> Result<&'b [u8], Wire
 ///
 /// # Errors
 ///
-/// [`WireError::BadCobs`] when a block runs past the end of `buf` or a code
-/// byte is `0`.
+/// [`WireError::BadCobs`] when a block runs past the end of `buf`, or any
+/// byte (code or data) is `0`: an encoded frame holds none.
 pub fn cobs_decode_in_place(buf: &mut [u8]) -> Result<usize, WireError> {
     let n = buf.len();
     let mut read = 0;
@@ -150,6 +150,9 @@ pub fn cobs_decode_in_place(buf: &mut [u8]) -> Result<usize, WireError> {
         }
         while read < end {
             let b = *buf.get(read).ok_or(WireError::BadCobs)?;
+            if b == 0 {
+                return Err(WireError::BadCobs);
+            }
             *buf.get_mut(write).ok_or(WireError::BadCobs)? = b;
             read += 1;
             write += 1;
