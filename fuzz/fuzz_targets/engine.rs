@@ -10,7 +10,6 @@
 #![no_main]
 
 use isoscope_core::command::{Command, Point3};
-use isoscope_core::display::OrderConfig;
 use isoscope_core::engine::{Engine, EngineConfig};
 use isoscope_core::wire::{
     AXIS_X, AXIS_Y, AXIS_Z, FrameDecoder, Levels, Message, PROTOCOL_VERSION, SampleType, encode,
@@ -45,13 +44,8 @@ fn clean_volume() -> Vec<u8> {
     out
 }
 
-/// The default settings with a light ordering pass (the picture's order is
-/// not what is checked; speed is).
 fn config() -> EngineConfig {
-    EngineConfig {
-        order: OrderConfig { passes: 2, kicks: 0, min_kicks: 0, ..OrderConfig::default() },
-        ..EngineConfig::default()
-    }
+    EngineConfig::default()
 }
 
 fn surface(e: &Engine<'_>) -> Vec<Command<[u32; 3]>> {

@@ -153,61 +153,39 @@ pub fn reference_precheck(frame: &[u8]) -> Result<(), WireError> {
     Ok(())
 }
 
-/// Engine memory for the `engine` target: slices of 1 KB (16 x 16 u32-size
-/// samples), rows of 32, 4096 commands and points.
+/// Engine memory for the `engine` target: slices of 1 KB, rows of 32, 4096
+/// points in each surface.
 pub struct EngineMem {
-    slices: [Vec<u8>; 2],
+    slices: Vec<u8>,
     rows: [Vec<f32>; 2],
-    points: [Vec<isoscope_core::command::Point3>; 2],
+    points: [Vec<isoscope_core::engine::Packed>; 2],
     kinds: [Vec<u8>; 2],
-    screen: Vec<isoscope_core::screen::ScreenPoint>,
-    flags: Vec<u8>,
-    index: [Vec<u32>; 4],
-    edges: Vec<u64>,
-    back: Vec<isoscope_core::screen::ScreenPoint>,
-    back_flags: Vec<u8>,
 }
 
 impl EngineMem {
     /// Zeroed memory.
     pub fn new() -> Self {
         const P: usize = 4096;
-        use isoscope_core::{command::Point3, screen::ScreenPoint};
         Self {
-            slices: [vec![0; 1024], vec![0; 1024]],
+            slices: vec![0; 2048],
             rows: [vec![0.0; 32], vec![0.0; 32]],
-            points: [vec![Point3::default(); P], vec![Point3::default(); P]],
-            kinds: [vec![0; P], vec![0; P]],
-            screen: vec![ScreenPoint::default(); P],
-            flags: vec![0; P],
-            index: std::array::from_fn(|_| vec![0; P]),
-            edges: vec![0; P],
-            back: vec![ScreenPoint::default(); P],
-            back_flags: vec![0; P],
+            points: [vec![[0; 3]; P], vec![[0; 3]; P]],
+            kinds: [vec![0; P / 4], vec![0; P / 4]],
         }
     }
 
-    /// The memory, lent to an engine.
+    /// The memory, lent to an engine (no extra scratch: the slices are it,
+    /// as on the MCU).
     pub fn buffers(&mut self) -> isoscope_core::engine::Buffers<'_> {
-        let [s0, s1] = &mut self.slices;
         let [r0, r1] = &mut self.rows;
         let [p0, p1] = &mut self.points;
         let [k0, k1] = &mut self.kinds;
-        let [a, b, c, d] = &mut self.index;
         isoscope_core::engine::Buffers {
-            slices: [s0, s1],
+            slices: &mut self.slices,
             rows: [r0, r1],
-            geometry: [(p0, k0), (p1, k1)],
-            screen: (&mut self.screen, &mut self.flags),
-            scratch: isoscope_core::display::ScratchStore::with_storage(
-                a,
-                b,
-                c,
-                d,
-                &mut self.edges,
-                &mut self.back,
-                &mut self.back_flags,
-            ),
+            front: (p0, k0),
+            back: (p1, k1),
+            scratch: &mut [],
         }
     }
 }

@@ -5,11 +5,8 @@
 use crate::phosphor::{Phosphor, PhosphorConfig};
 use crate::virtual_dac::VirtualDac;
 use anyhow::{Context, Result};
-use isoscope_core::command::Point3;
 use isoscope_core::dac::{Beam, Dac};
-use isoscope_core::display::ScratchStore;
-use isoscope_core::engine::{Buffers, Engine, EngineConfig, Event};
-use isoscope_core::screen::ScreenPoint;
+use isoscope_core::engine::{Buffers, Engine, EngineConfig, Event, Packed};
 use std::io::{ErrorKind, Read, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -17,57 +14,38 @@ use std::time::{Duration, Instant};
 /// The engine's memory on the heap.
 #[derive(Debug, Clone)]
 pub struct HostBuffers {
-    slices: [Vec<u8>; 2],
+    slices: Vec<u8>,
     rows: [Vec<f32>; 2],
-    points: [Vec<Point3>; 2],
+    points: [Vec<Packed>; 2],
     kinds: [Vec<u8>; 2],
-    screen: Vec<ScreenPoint>,
-    flags: Vec<u8>,
-    index: [Vec<u32>; 4],
-    edges: Vec<u64>,
-    back: Vec<ScreenPoint>,
-    back_flags: Vec<u8>,
+    scratch: Vec<u8>,
 }
 
 impl HostBuffers {
     /// Room for slices of `slice_bytes`, rows of `extent` samples, and
-    /// `points` commands (surface) and points (display list).
+    /// `points` points in each surface (with the scratch to stitch and
+    /// order them all: 8 bytes a point).
     pub fn new(slice_bytes: usize, extent: usize, points: usize) -> Self {
         Self {
-            slices: [vec![0; slice_bytes], vec![0; slice_bytes]],
+            slices: vec![0; 2 * slice_bytes],
             rows: [vec![0.0; extent], vec![0.0; extent]],
-            points: [vec![Point3::default(); points], vec![Point3::default(); points]],
-            kinds: [vec![0; points], vec![0; points]],
-            screen: vec![ScreenPoint::default(); points],
-            flags: vec![0; points],
-            index: std::array::from_fn(|_| vec![0; points]),
-            edges: vec![0; points],
-            back: vec![ScreenPoint::default(); points],
-            back_flags: vec![0; points],
+            points: [vec![[0; 3]; points], vec![[0; 3]; points]],
+            kinds: [vec![0; points.div_ceil(4)], vec![0; points.div_ceil(4)]],
+            scratch: vec![0; 8 * points],
         }
     }
 
     /// The buffers, lent to an engine.
     pub fn buffers(&mut self) -> Buffers<'_> {
-        let [s0, s1] = &mut self.slices;
         let [r0, r1] = &mut self.rows;
         let [p0, p1] = &mut self.points;
         let [k0, k1] = &mut self.kinds;
-        let [a, b, c, d] = &mut self.index;
         Buffers {
-            slices: [s0, s1],
+            slices: &mut self.slices,
             rows: [r0, r1],
-            geometry: [(p0, k0), (p1, k1)],
-            screen: (&mut self.screen, &mut self.flags),
-            scratch: ScratchStore::with_storage(
-                a,
-                b,
-                c,
-                d,
-                &mut self.edges,
-                &mut self.back,
-                &mut self.back_flags,
-            ),
+            front: (p0, k0),
+            back: (p1, k1),
+            scratch: &mut self.scratch,
         }
     }
 }

@@ -4,7 +4,8 @@
 
 use isoscope_core::command::{Command, Point3};
 use isoscope_core::demo::Demo;
-use isoscope_core::engine::{Engine, EngineConfig};
+use isoscope_core::display::OptimizeConfig;
+use isoscope_core::engine::{Engine, EngineConfig, Geometry, Packed};
 use isoscope_core::grid::{Planes, Volume};
 use isoscope_core::surface::{SliceId, SurfaceSink, contour_volume};
 use isoscope_core::trace::Traversal;
@@ -22,19 +23,35 @@ fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_isoscope-sim")
 }
 
-type Frag = Vec<[u32; 3]>;
+/// An undirected segment in the engine's fixed point (a dot: both ends equal).
+type Seg = (Packed, Packed);
 
-fn fragments(cmds: impl Iterator<Item = Command<Point3>>) -> Vec<Frag> {
-    let mut out: Vec<Frag> = Vec::new();
+/// The segments commands draw, sorted, zero-length lines left out.
+fn segments(cmds: impl Iterator<Item = Command<Point3>>, shift: u8) -> Vec<Seg> {
+    let mut out = Vec::new();
+    let mut at = None;
     for c in cmds {
-        let p = c.point();
-        let key = [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+        let p = Geometry::quantise_with(shift, *c.point());
         match c {
-            Command::MoveTo(_) | Command::Point(_) => out.push(vec![key]),
-            Command::LineTo(_) => out.last_mut().unwrap().push(key),
+            Command::MoveTo(_) => at = Some(p),
+            Command::Point(_) => {
+                out.push((p, p));
+                at = None;
+            }
+            Command::LineTo(_) => {
+                if let Some(a) = at.filter(|&a| a != p) {
+                    out.push(if a < p { (a, p) } else { (p, a) });
+                }
+                at = Some(p);
+            }
         }
     }
+    // What is drawn, once: duplicates and dots on lines are culled.
     out.sort();
+    out.dedup();
+    let on_line: std::collections::HashSet<Packed> =
+        out.iter().filter(|(a, b)| a != b).flat_map(|&(a, b)| [a, b]).collect();
+    out.retain(|(a, b)| a != b || !on_line.contains(a));
     out
 }
 
@@ -125,7 +142,9 @@ impl Read for Answers {
 fn a_lossy_line_delivers_the_exact_surface_by_retransmission() {
     let (vol, values) = demo(20);
     let mem: &'static mut HostBuffers = Box::leak(Box::new(HostBuffers::new(20 * 20 * 4, 64, 100_000)));
-    let engine = Arc::new(Mutex::new(Engine::new(EngineConfig::default(), mem.buffers()).unwrap()));
+    // No merging, so that the picture's segments are the contour's.
+    let cfg = EngineConfig { optimize: OptimizeConfig { tolerance: 0.0 }, ..EngineConfig::default() };
+    let engine = Arc::new(Mutex::new(Engine::new(cfg, mem.buffers()).unwrap()));
     let (tx, rx) = channel();
     let line = Line {
         engine: engine.clone(),
@@ -148,12 +167,14 @@ fn a_lossy_line_delivers_the_exact_surface_by_retransmission() {
         )),
         "{report:?}"
     );
-    let e = engine.lock().unwrap();
-    let got = fragments(e.surface().expect("a picture").commands());
+    let mut e = engine.lock().unwrap();
+    e.update(u32::MAX / 2);
+    let g = e.surface().expect("a picture");
+    let got = segments(g.commands(), g.shift());
     let volume = Volume::new(&values, 20, 20, 20).unwrap();
     let mut keep = Keep(Vec::new());
     contour_volume(&volume, Planes::ALL, &[0.1], Traversal::Corrected, &mut keep).unwrap();
-    assert_eq!(got, fragments(keep.0.into_iter()));
+    assert_eq!(got, segments(keep.0.into_iter(), Geometry::shift_for([20, 20, 20])));
 }
 
 #[test]

@@ -1,16 +1,60 @@
-//! The chicken-wire surface of one volume in voxel coordinates: contour
-//! commands kept so that a new view re-projects them without the volume.
+//! The chicken-wire surface of one volume in voxel coordinates, compact:
+//! kept so that any view re-projects it without the volume.
+//!
+//! A point is three `u16` in fixed point (`1 / 2^shift` voxel, the shift
+//! chosen per volume so that its largest extent fills the `u16` range), and
+//! its command kind takes 2 bits: 6.25 bytes a point. The quantisation step
+//! is about 1/16 LSB of a 12-bit screen whatever the volume's size, and a
+//! crossing shared by two subgrids or slices stays bit-identical (the same
+//! `f32` quantises to the same code).
 
 use crate::command::{Command, Point3};
 
-/// Command kinds, one byte each beside the points.
-const MOVE: u8 = 0;
-const LINE: u8 = 1;
-const DOT: u8 = 2;
+/// A point in fixed point voxel coordinates.
+pub type Packed = [u16; 3];
 
-/// Contour commands in voxel coordinates over caller storage (13 bytes a
-/// command: a [`Point3`] and its kind). The capacity is the shorter of the
-/// two slices.
+/// What a stored point starts or continues.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Kind {
+    /// Continues the polyline (DRAWTO).
+    Line,
+    /// Starts an open polyline (SETPOINT).
+    Move,
+    /// A dot (DRAWPOINT).
+    Dot,
+    /// Starts a closed loop: its last point joins back to this one.
+    Loop,
+}
+
+impl Kind {
+    const fn bits(self) -> u8 {
+        match self {
+            Kind::Line => 0,
+            Kind::Move => 1,
+            Kind::Dot => 2,
+            Kind::Loop => 3,
+        }
+    }
+
+    const fn from_bits(b: u8) -> Kind {
+        match b & 3 {
+            0 => Kind::Line,
+            1 => Kind::Move,
+            2 => Kind::Dot,
+            _ => Kind::Loop,
+        }
+    }
+
+    /// Whether a polyline (or dot) starts here.
+    pub const fn starts(self) -> bool {
+        !matches!(self, Kind::Line)
+    }
+}
+
+/// Contour commands in voxel coordinates over caller storage: `points`
+/// (6 bytes each) and `kinds` (4 a byte). The capacity is the smaller of
+/// `points.len()` and `4 * kinds.len()`.
 ///
 /// `push` hands the command back when full and counts it; a polyline cut
 /// short by the capacity keeps the part that fitted, and a lone trailing
@@ -18,46 +62,135 @@ const DOT: u8 = 2;
 /// commands.
 #[derive(Debug, PartialEq)]
 pub struct Geometry<'a> {
-    points: &'a mut [Point3],
+    points: &'a mut [Packed],
     kinds: &'a mut [u8],
     len: usize,
     dropped: u32,
     /// A command of the open polyline was refused: its later `LineTo`s are
     /// refused too, until the next `MoveTo` or `Point`.
     broken: bool,
+    /// Fixed point: `1 / 2^shift` voxel per code.
+    shift: u8,
 }
 
 impl<'a> Geometry<'a> {
-    /// An empty store over `points` and `kinds`.
-    pub fn new(points: &'a mut [Point3], kinds: &'a mut [u8]) -> Self {
-        Self { points, kinds, len: 0, dropped: 0, broken: false }
+    /// An empty store over `points` and `kinds`, at the finest scale.
+    pub fn new(points: &'a mut [Packed], kinds: &'a mut [u8]) -> Self {
+        Self { points, kinds, len: 0, dropped: 0, broken: false, shift: 0 }
     }
 
-    /// The most commands it holds.
+    /// The fixed point shift for a volume of `dims` samples: the largest
+    /// with `(max extent - 1) * 2^shift <= 65535`, at most 12.
+    pub fn shift_for(dims: [u16; 3]) -> u8 {
+        let top = dims.iter().map(|&d| u32::from(d.max(2)) - 1).max().unwrap_or(1);
+        let mut shift = 0u8;
+        while shift < 12 && (top << (shift + 1)) <= 0xFFFF {
+            shift += 1;
+        }
+        shift
+    }
+
+    /// The most points it holds.
     pub fn capacity(&self) -> usize {
-        self.points.len().min(self.kinds.len())
+        self.points.len().min(self.kinds.len().saturating_mul(4))
     }
 
-    /// Commands held.
+    /// Points held.
     pub fn len(&self) -> usize {
         self.len
     }
 
-    /// Whether no command is held.
+    /// Whether no point is held.
     pub fn is_empty(&self) -> bool {
         self.len == 0
     }
 
-    /// Commands refused since the last [`Geometry::clear`].
+    /// Commands refused since the last [`Geometry::reset`].
     pub fn dropped(&self) -> u32 {
         self.dropped
     }
 
-    /// Forget every command.
-    pub fn clear(&mut self) {
+    /// The fixed point shift.
+    pub fn shift(&self) -> u8 {
+        self.shift
+    }
+
+    /// Forget every point and take a new scale.
+    pub fn reset(&mut self, shift: u8) {
         self.len = 0;
         self.dropped = 0;
         self.broken = false;
+        self.shift = shift.min(12);
+    }
+
+    /// `p` in this store's fixed point (clamped to the `u16` range).
+    pub fn quantise(&self, p: Point3) -> Packed {
+        Self::quantise_with(self.shift, p)
+    }
+
+    /// `p` in the fixed point of `shift` (clamped to the `u16` range).
+    pub fn quantise_with(shift: u8, p: Point3) -> Packed {
+        let k = f32::from(1u16 << shift.min(12));
+        let q = |v: f32| {
+            let r = libm::roundf(v * k);
+            if r >= 65535.0 {
+                0xFFFF
+            } else if r > 0.0 {
+                r as u16
+            } else {
+                0
+            }
+        };
+        [q(p.x), q(p.y), q(p.z)]
+    }
+
+    /// A fixed point code back in voxel coordinates (exact).
+    pub fn point(&self, q: Packed) -> Point3 {
+        let k = 1.0 / f32::from(1u16 << self.shift);
+        Point3::new(f32::from(q[0]) * k, f32::from(q[1]) * k, f32::from(q[2]) * k)
+    }
+
+    /// Point `i` and its kind.
+    pub fn get(&self, i: usize) -> Option<(Packed, Kind)> {
+        if i >= self.len {
+            return None;
+        }
+        let p = *self.points.get(i)?;
+        let byte = *self.kinds.get(i / 4)?;
+        Some((p, Kind::from_bits(byte >> (2 * (i % 4)))))
+    }
+
+    fn set_kind(&mut self, i: usize, kind: Kind) {
+        if let Some(byte) = self.kinds.get_mut(i / 4) {
+            let s = 2 * (i % 4);
+            *byte = (*byte & !(3 << s)) | (kind.bits() << s);
+        }
+    }
+
+    /// Append a point of `kind`; false when full (counted).
+    pub(crate) fn push_raw(&mut self, q: Packed, kind: Kind) -> bool {
+        if self.len >= self.capacity() {
+            self.dropped = self.dropped.saturating_add(1);
+            return false;
+        }
+        if let Some(slot) = self.points.get_mut(self.len) {
+            *slot = q;
+        }
+        self.set_kind(self.len, kind);
+        self.len += 1;
+        true
+    }
+
+    /// Drop the last point.
+    pub(crate) fn pop(&mut self) {
+        self.len = self.len.saturating_sub(1);
+    }
+
+    /// Mark point `i` (a polyline's first) as the start of a closed loop.
+    pub(crate) fn close_at(&mut self, i: usize) {
+        if i < self.len {
+            self.set_kind(i, Kind::Loop);
+        }
     }
 
     /// Append a command.
@@ -65,45 +198,84 @@ impl<'a> Geometry<'a> {
     /// # Errors
     /// The command, when the store is full.
     pub fn push(&mut self, command: Command<Point3>) -> Result<(), Command<Point3>> {
-        match command {
+        let kind = match command {
             Command::LineTo(_) if self.broken => {
                 self.dropped = self.dropped.saturating_add(1);
                 return Err(command);
             }
-            Command::LineTo(_) => {}
-            Command::MoveTo(_) | Command::Point(_) => self.broken = false,
+            Command::LineTo(_) => Kind::Line,
+            Command::MoveTo(_) => Kind::Move,
+            Command::Point(_) => Kind::Dot,
+        };
+        if kind.starts() {
+            self.broken = false;
         }
-        if self.len >= self.capacity() {
+        if !self.push_raw(self.quantise(*command.point()), kind) {
             self.broken = true;
-            self.dropped = self.dropped.saturating_add(1);
             // A MoveTo whose line did not fit would draw nothing: take it back.
-            if self.len > 0 && self.kinds.get(self.len - 1) == Some(&MOVE) {
-                self.len -= 1;
+            if matches!(self.get(self.len.wrapping_sub(1)), Some((_, Kind::Move))) {
+                self.pop();
                 self.dropped = self.dropped.saturating_add(1);
             }
             return Err(command);
         }
-        let (p, kind) = match command {
-            Command::MoveTo(p) => (p, MOVE),
-            Command::LineTo(p) => (p, LINE),
-            Command::Point(p) => (p, DOT),
-        };
-        if let (Some(slot), Some(k)) = (self.points.get_mut(self.len), self.kinds.get_mut(self.len)) {
-            *slot = p;
-            *k = kind;
-            self.len += 1;
-        }
         Ok(())
     }
 
-    /// The commands, in the order they came.
-    pub fn commands(&self) -> impl Iterator<Item = Command<Point3>> + '_ {
-        let n = self.len;
-        self.points.iter().zip(self.kinds.iter()).take(n).map(|(&p, &k)| match k {
-            MOVE => Command::MoveTo(p),
-            DOT => Command::Point(p),
-            _ => Command::LineTo(p),
-        })
+    /// The drawing commands, in order; a closed loop ends with the `LineTo`
+    /// back to its first point.
+    pub fn commands(&self) -> Commands<'_, 'a> {
+        Commands { g: self, i: 0, first: None, close: None }
+    }
+
+    /// Polylines and dots held.
+    pub fn polylines(&self) -> usize {
+        (0..self.len).filter(|&i| self.get(i).is_some_and(|(_, k)| k.starts())).count()
+    }
+}
+
+/// The commands of a [`Geometry`] ([`Geometry::commands`]).
+#[derive(Debug, Clone)]
+pub struct Commands<'g, 'a> {
+    g: &'g Geometry<'a>,
+    i: usize,
+    /// The first point of the loop being drawn.
+    first: Option<Packed>,
+    /// The closing `LineTo` due before the next point.
+    close: Option<Packed>,
+}
+
+impl Iterator for Commands<'_, '_> {
+    type Item = Command<Point3>;
+
+    fn next(&mut self) -> Option<Command<Point3>> {
+        if let Some(q) = self.close.take() {
+            return Some(Command::LineTo(self.g.point(q)));
+        }
+        let (q, kind) = self.g.get(self.i)?;
+        self.i += 1;
+        // The loop ends here if the next point starts something (or none).
+        let ends = self.g.get(self.i).is_none_or(|(_, k)| k.starts());
+        let p = self.g.point(q);
+        let command = match kind {
+            Kind::Line => Command::LineTo(p),
+            Kind::Move => {
+                self.first = None;
+                Command::MoveTo(p)
+            }
+            Kind::Dot => {
+                self.first = None;
+                Command::Point(p)
+            }
+            Kind::Loop => {
+                self.first = Some(q);
+                Command::MoveTo(p)
+            }
+        };
+        if ends {
+            self.close = self.first.take();
+        }
+        Some(command)
     }
 }
 
@@ -115,10 +287,15 @@ mod tests {
         Point3::new(x, 0.0, 0.0)
     }
 
+    fn store(n: usize) -> (Vec<Packed>, Vec<u8>) {
+        (vec![[0; 3]; n], vec![0; n.div_ceil(4)])
+    }
+
     #[test]
     fn push_hands_back_when_full_and_takes_back_a_lone_move() {
-        let (mut pts, mut kinds) = ([Point3::default(); 3], [0u8; 3]);
+        let (mut pts, mut kinds) = store(3);
         let mut g = Geometry::new(&mut pts, &mut kinds);
+        g.reset(4);
         assert_eq!(g.push(Command::MoveTo(p(0.0))), Ok(()));
         assert_eq!(g.push(Command::LineTo(p(1.0))), Ok(()));
         assert_eq!(g.push(Command::MoveTo(p(2.0))), Ok(()));
@@ -133,8 +310,68 @@ mod tests {
         assert_eq!(got, [Command::MoveTo(p(0.0)), Command::LineTo(p(1.0))]);
         assert_eq!(g.push(Command::Point(p(5.0))), Ok(()));
         assert_eq!(g.commands().last(), Some(Command::Point(p(5.0))));
-        g.clear();
+        g.reset(4);
         assert!(g.is_empty());
         assert_eq!(g.dropped(), 0);
+    }
+
+    #[test]
+    fn shift_fills_the_u16_range() {
+        assert_eq!(Geometry::shift_for([128, 128, 84]), 9); // 127 * 512 = 65024
+        assert_eq!(Geometry::shift_for([2, 2, 2]), 12);
+        assert_eq!(Geometry::shift_for([256, 3, 3]), 8);
+        assert_eq!(Geometry::shift_for([257, 3, 3]), 7); // 256 * 256 = 65536 > 65535
+        assert_eq!(Geometry::shift_for([65535, 2, 2]), 0);
+        assert_eq!(Geometry::shift_for([0, 0, 0]), 12);
+    }
+
+    #[test]
+    fn quantisation_is_exact_on_the_grid_and_within_half_a_step() {
+        let (mut pts, mut kinds) = store(1);
+        let mut g = Geometry::new(&mut pts, &mut kinds);
+        g.reset(Geometry::shift_for([128, 128, 84]));
+        let step = 1.0 / 512.0;
+        for v in [0.0f32, 1.0, 63.5, 127.0, 0.3333, 101.12345, 126.999] {
+            let back = g.point(g.quantise(Point3::new(v, v, v)));
+            assert!((back.x - v).abs() <= step / 2.0, "{v} -> {}", back.x);
+        }
+        assert_eq!(g.point(g.quantise(Point3::new(17.0, 3.5, 0.25))), Point3::new(17.0, 3.5, 0.25));
+        assert_eq!(g.quantise(Point3::new(-1.0, 1e9, f32::NAN)), [0, 0xFFFF, 0]);
+    }
+
+    #[test]
+    fn kinds_pack_four_a_byte_and_loops_close() {
+        let (mut pts, mut kinds) = store(9);
+        let mut g = Geometry::new(&mut pts, &mut kinds);
+        g.reset(0);
+        let q = |x: u16| [x, 0, 0];
+        for (x, k) in [
+            (1, Kind::Move),
+            (2, Kind::Line),
+            (3, Kind::Line),
+            (4, Kind::Dot),
+            (5, Kind::Move),
+            (6, Kind::Line),
+        ] {
+            assert!(g.push_raw(q(x), k));
+        }
+        g.close_at(0);
+        let pt = |x: f32| Point3::new(x, 0.0, 0.0);
+        let got: Vec<_> = g.commands().collect();
+        assert_eq!(
+            got,
+            [
+                Command::MoveTo(pt(1.0)),
+                Command::LineTo(pt(2.0)),
+                Command::LineTo(pt(3.0)),
+                Command::LineTo(pt(1.0)),
+                Command::Point(pt(4.0)),
+                Command::MoveTo(pt(5.0)),
+                Command::LineTo(pt(6.0)),
+            ]
+        );
+        assert_eq!(g.polylines(), 3);
+        assert_eq!(g.get(3), Some((q(4), Kind::Dot)));
+        assert_eq!(g.get(6), None);
     }
 }

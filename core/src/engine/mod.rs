@@ -7,19 +7,23 @@
 //!   order, answers each with `Ack` or `Nack` (answering a retransmission
 //!   again from memory, without applying it twice);
 //! - streams a volume one z slice at a time through two slice buffers,
-//!   contouring each slice as it completes (see [`stream`](self) below), so
+//!   contouring each slice as it completes, so memory is `O(nx * ny)` and
 //!   volumes deeper than RAM work;
-//! - keeps the committed surface in voxel coordinates ([`Geometry`]), two of
-//!   them: the one on screen stays untouched until a new volume is complete,
-//!   so an aborted, corrupt or abandoned transfer never costs the picture;
-//! - re-projects the surface when the view changes (no volume needed) and
-//!   builds the display list: project, cull, stitch, merge, order.
+//! - keeps two surfaces in voxel coordinates ([`Geometry`], 6.25 bytes a
+//!   point): the picture on screen, untouched until a new volume is
+//!   complete (so an aborted, corrupt or abandoned transfer never costs it),
+//!   and the one being received;
+//! - when a volume is complete, stitches and orders it in 3D into the
+//!   picture ([`ChainStats`]; the idle slice buffers are the scratch), so
+//!   that any view draws it with short jumps: a new view, or a spinning
+//!   one, costs no more than projecting each point as the beam reaches it.
 //!
 //! What it answers is queued as bytes for the UART ([`Engine::transmit`]):
 //! an `Ack` or `Nack` for every command, and a `Status` once a new volume's
 //! picture is drawn (so the host can time "last slice to picture") or a
-//! transfer is abandoned;
-//! what happened is queued as [`Event`]s for a log ([`Engine::next_event`]).
+//! transfer is abandoned; what happened is queued as [`Event`]s for a log
+//! ([`Engine::next_event`]). [`Engine::frame`] is the beam schedule of one
+//! frame, what every board plays.
 //!
 //! The caller owns the memory ([`Buffers`]; [`StaticBuffers`] holds it in
 //! arrays for the MCU) and the clock (milliseconds, wrapping).
@@ -27,17 +31,20 @@
 //! Changing the levels needs the volume again (they apply to the next
 //! volume); changing the view or the beam does not.
 
+mod chain;
 mod geometry;
 mod session;
 mod stream;
 
-pub use geometry::Geometry;
+pub use chain::ChainStats;
+use chain::Pass;
+pub use geometry::{Commands, Geometry, Kind, Packed};
 pub use session::REPLAY;
 pub use stream::VolumeSpec;
 
 use crate::beam::{BeamConfig, BeamConfigError, Scheduler, frame_stats};
 use crate::command::{Command, Point3};
-use crate::display::{DisplayStore, OptimizeConfig, OrderConfig, ScratchStore};
+use crate::display::OptimizeConfig;
 use crate::screen::ScreenPoint;
 use crate::view::{Bounds, Projection, View, ViewError, ViewTransform};
 use crate::wire::{
@@ -54,102 +61,81 @@ pub const TX_QUEUE: usize = 512;
 /// Events queued before more are dropped (and counted).
 pub const EVENT_QUEUE: usize = 16;
 
-/// The display list the engine draws: the core's [`DisplayStore`] over
-/// caller memory.
-pub type ScreenList<'a> = DisplayStore<&'a mut [ScreenPoint], &'a mut [u8]>;
-
-/// Scratch for optimising and ordering the display list, over caller memory.
-pub type ScreenScratch<'a> = ScratchStore<&'a mut [u32], &'a mut [u64], &'a mut [ScreenPoint], &'a mut [u8]>;
-
 /// The engine's memory, lent by the caller.
 ///
-/// - `slices`: two slice buffers of raw sample bytes; each sets the largest
-///   slice, `nx * ny * sample size` bytes.
+/// - `slices`: both slice buffers, one after the other: half of it is the
+///   largest slice, `nx * ny * sample size` bytes. Between volumes it is the
+///   scratch for stitching and ordering, which takes about 6 bytes a point
+///   of the surface (14 a fragment): so the slices should hold at least
+///   `6 * points` bytes in all, or a large surface is shown unordered.
 /// - `rows`: two row buffers; each sets the largest `nx` and `ny`.
-/// - `geometry`: two surfaces (on screen, being received) of points and
-///   command kinds, 13 bytes a command.
-/// - `screen`: the display list (9 bytes a point) and `scratch` (32 bytes a
-///   point, at least the display list's capacity).
+/// - `front`, `back`: the two surfaces (on screen, being received): points
+///   (6 bytes each) and their kinds (2 bits each: `kinds.len() * 4 >=
+///   points`).
+/// - `scratch`: more room for stitching and ordering, where memory is
+///   plenty (the host); the larger of it and the idle slices is used. Empty
+///   on the MCU.
 #[derive(Debug)]
 pub struct Buffers<'a> {
-    /// The previous and the current slice.
-    pub slices: [&'a mut [u8]; 2],
+    /// Both slices (the previous and the current one), one after the other.
+    pub slices: &'a mut [u8],
     /// Two rows of samples widened to `f32`.
     pub rows: [&'a mut [f32]; 2],
-    /// Two surfaces: points and their command kinds.
-    pub geometry: [(&'a mut [Point3], &'a mut [u8]); 2],
-    /// The display list's points and flags.
-    pub screen: (&'a mut [ScreenPoint], &'a mut [u8]),
-    /// Scratch for the display list.
-    pub scratch: ScreenScratch<'a>,
+    /// The picture on screen: points and packed kinds.
+    pub front: (&'a mut [Packed], &'a mut [u8]),
+    /// The surface being received: points and packed kinds.
+    pub back: (&'a mut [Packed], &'a mut [u8]),
+    /// Extra scratch (may be empty).
+    pub scratch: &'a mut [u8],
 }
 
 /// The engine's memory in arrays, for a `static` on the MCU.
 ///
 /// - `SLICE`: bytes in one slice (`nx * ny * sample size`), twice.
 /// - `EXTENT`: the largest `nx` or `ny`.
-/// - `POINTS`: commands in each of the two surfaces, and points in the
-///   display list.
+/// - `POINTS`: points in each of the two surfaces.
+/// - `KINDS`: `POINTS / 4`, rounded up (the kinds take 2 bits a point).
 ///
-/// It takes `2 * SLICE + 8 * EXTENT + 67 * POINTS` bytes.
+/// It takes `2 * SLICE + 8 * EXTENT + 12.5 * POINTS` bytes; for slices of
+/// 128 x 128 `u16` and 2 x 8192 points, 167 KB.
 #[derive(Debug, Clone, PartialEq)]
-pub struct StaticBuffers<const SLICE: usize, const EXTENT: usize, const POINTS: usize> {
+pub struct StaticBuffers<const SLICE: usize, const EXTENT: usize, const POINTS: usize, const KINDS: usize> {
     slices: [[u8; SLICE]; 2],
     rows: [[f32; EXTENT]; 2],
-    points: [[Point3; POINTS]; 2],
-    kinds: [[u8; POINTS]; 2],
-    screen: [ScreenPoint; POINTS],
-    flags: [u8; POINTS],
-    index: [[u32; POINTS]; 4],
-    edges: [u64; POINTS],
-    back: [ScreenPoint; POINTS],
-    back_flags: [u8; POINTS],
+    points: [[Packed; POINTS]; 2],
+    kinds: [[u8; KINDS]; 2],
 }
 
-impl<const SLICE: usize, const EXTENT: usize, const POINTS: usize> StaticBuffers<SLICE, EXTENT, POINTS> {
+impl<const SLICE: usize, const EXTENT: usize, const POINTS: usize, const KINDS: usize>
+    StaticBuffers<SLICE, EXTENT, POINTS, KINDS>
+{
     /// Zeroed buffers.
     pub const fn new() -> Self {
         Self {
             slices: [[0; SLICE]; 2],
             rows: [[0.0; EXTENT]; 2],
-            points: [[Point3::new(0.0, 0.0, 0.0); POINTS]; 2],
-            kinds: [[0; POINTS]; 2],
-            screen: [ScreenPoint::new(0.0, 0.0); POINTS],
-            flags: [0; POINTS],
-            index: [[0; POINTS]; 4],
-            edges: [0; POINTS],
-            back: [ScreenPoint::new(0.0, 0.0); POINTS],
-            back_flags: [0; POINTS],
+            points: [[[0; 3]; POINTS]; 2],
+            kinds: [[0; KINDS]; 2],
         }
     }
 
     /// The buffers, lent to an [`Engine`].
     pub fn buffers(&mut self) -> Buffers<'_> {
-        let [s0, s1] = &mut self.slices;
         let [r0, r1] = &mut self.rows;
         let [p0, p1] = &mut self.points;
         let [k0, k1] = &mut self.kinds;
-        let [a, b, c, d] = &mut self.index;
         Buffers {
-            slices: [s0, s1],
+            slices: self.slices.as_flattened_mut(),
             rows: [r0, r1],
-            geometry: [(p0, k0), (p1, k1)],
-            screen: (&mut self.screen, &mut self.flags),
-            scratch: ScratchStore::with_storage(
-                a,
-                b,
-                c,
-                d,
-                &mut self.edges,
-                &mut self.back,
-                &mut self.back_flags,
-            ),
+            front: (p0, k0),
+            back: (p1, k1),
+            scratch: &mut [],
         }
     }
 }
 
-impl<const SLICE: usize, const EXTENT: usize, const POINTS: usize> Default
-    for StaticBuffers<SLICE, EXTENT, POINTS>
+impl<const SLICE: usize, const EXTENT: usize, const POINTS: usize, const KINDS: usize> Default
+    for StaticBuffers<SLICE, EXTENT, POINTS, KINDS>
 {
     fn default() -> Self {
         Self::new()
@@ -172,17 +158,16 @@ pub struct EngineConfig {
     pub view: View,
     /// The beam until the host sets it.
     pub beam: BeamConfig,
-    /// Display-list optimisation.
+    /// Merging collinear runs: the tolerance in DAC units (for the largest
+    /// scale any view gives the volume); 0 merges nothing.
     pub optimize: OptimizeConfig,
-    /// Display-list ordering (its `start` is replaced by the park position).
-    pub order: OrderConfig,
     /// A transfer with no accepted message for this long is abandoned (ms).
     pub transfer_timeout_ms: u32,
 }
 
 impl Default for EngineConfig {
-    /// Every sample type, 1 MS/s, the default view, beam and passes, and a
-    /// 5 s transfer timeout.
+    /// Every sample type, 1 MS/s, the default view, beam and tolerance, and
+    /// a 5 s transfer timeout.
     fn default() -> Self {
         Self {
             firmware: [0, 1, 0],
@@ -191,7 +176,6 @@ impl Default for EngineConfig {
             view: View::DEFAULT,
             beam: BeamConfig::default(),
             optimize: OptimizeConfig::default(),
-            order: OrderConfig::default(),
             transfer_timeout_ms: 5_000,
         }
     }
@@ -205,8 +189,7 @@ pub enum EngineError {
     Beam(BeamConfigError),
     /// The view is invalid.
     View(ViewError),
-    /// A slice or row buffer is too small for a 2x2 slice of `f32`, or the
-    /// scratch is smaller than the display list.
+    /// The slice or row buffers are too small for a 2x2 slice of `f32`.
     Buffers,
 }
 
@@ -215,7 +198,7 @@ impl core::fmt::Display for EngineError {
         match self {
             Self::Beam(e) => write!(f, "invalid beam settings: {e}"),
             Self::View(e) => write!(f, "invalid view: {e}"),
-            Self::Buffers => f.write_str("engine buffers too small (slices, rows or scratch)"),
+            Self::Buffers => f.write_str("engine buffers too small (slices or rows)"),
         }
     }
 }
@@ -301,14 +284,14 @@ pub enum Event {
     ViewSet,
     /// New beam settings.
     BeamSet,
-    /// The display list was rebuilt (new volume or view).
+    /// The picture changed (a new volume, view or beam).
     Redrawn {
-        /// Polylines drawn.
+        /// Polylines drawn (closed loops and dots included).
         polylines: u32,
         /// Points drawn.
         points: u32,
-        /// Points that did not fit the display list.
-        dropped: u32,
+        /// Blanked travel as a share of lit length, per mille, in this view.
+        blank_permille: u16,
         /// Refreshes per second at [`EngineConfig::sample_rate_hz`], times
         /// 100.
         refresh_centi_hz: u16,
@@ -332,9 +315,11 @@ impl core::fmt::Display for Event {
             Self::LevelsSet => f.write_str("levels set (for the next volume)"),
             Self::ViewSet => f.write_str("view set"),
             Self::BeamSet => f.write_str("beam set"),
-            Self::Redrawn { polylines, points, dropped, refresh_centi_hz } => write!(
+            Self::Redrawn { polylines, points, blank_permille, refresh_centi_hz } => write!(
                 f,
-                "redrawn polylines={polylines} points={points} dropped={dropped} refresh_hz={}.{:02}",
+                "redrawn polylines={polylines} points={points} blank={}.{}% refresh_hz={}.{:02}",
+                blank_permille / 10,
+                blank_permille % 10,
                 refresh_centi_hz / 100,
                 refresh_centi_hz % 100
             ),
@@ -369,25 +354,27 @@ pub struct Counters {
 struct Shown {
     dims: [u16; 3],
     spacing: [f32; 3],
+    points: u32,
 }
 
-/// Everything but the frame decoder and the display list.
+/// Everything but the frame decoder and the two surfaces.
 #[derive(Debug)]
 struct Device<'a> {
     cfg: EngineConfig,
     session: Session,
     stream: Stream<'a>,
-    geometry: [Geometry<'a>; 2],
-    /// The surface on screen (the other one receives).
-    front: usize,
+    /// The volume on screen.
     shown: Option<Shown>,
+    /// A volume is complete in the back surface: it becomes the picture at
+    /// the next [`Engine::update`]; until then new volume data is `Busy`.
+    commit: bool,
     view: View,
     spin_deg_per_s: f32,
     /// When `view.yaw` held (ms), for the spin.
     spin_epoch_ms: u32,
     beam: BeamConfig,
     levels: Levels,
-    /// The display list must be rebuilt.
+    /// The view or beam changed: fit the view again, count the frame again.
     dirty: bool,
     /// A volume was committed: report the status once its picture is drawn.
     status_due: bool,
@@ -403,28 +390,36 @@ struct Device<'a> {
 pub struct Engine<'a> {
     decoder: ProtocolDecoder,
     dev: Device<'a>,
-    list: ScreenList<'a>,
-    scratch: ScreenScratch<'a>,
+    /// The picture on screen.
+    front: Geometry<'a>,
+    /// The surface being received.
+    back: Geometry<'a>,
+    /// The view fitted to the picture, `None` with nothing to show.
+    transform: Option<ViewTransform>,
+    chain: ChainStats,
+    /// Extra scratch for [`chain::chain`].
+    scratch: &'a mut [u8],
     generation: u32,
 }
 
-/// The picture half of an [`Engine`] ([`Engine::split`]): the display list
-/// and the beam settings it is played with.
+/// The picture half of an [`Engine`] ([`Engine::split`]): the surface on
+/// screen, its view and the beam settings it is played with.
 #[derive(Debug, Clone, Copy)]
 pub struct Screen<'e, 'a> {
-    list: &'e ScreenList<'a>,
+    front: &'e Geometry<'a>,
+    transform: Option<ViewTransform>,
     beam: BeamConfig,
 }
 
 impl<'e> Screen<'e, '_> {
     /// One frame, as [`Engine::frame`].
-    pub fn frame(&self) -> Scheduler<impl Iterator<Item = Command<ScreenPoint>> + 'e> {
-        frame(self.list, &self.beam)
+    pub fn frame(&self) -> Scheduler<Projected<'e>> {
+        Scheduler::new(self.commands(), &self.beam)
     }
 
-    /// The display list.
-    pub fn display(&self) -> &'e ScreenList<'_> {
-        self.list
+    /// The picture's drawing commands on the screen, in drawing order.
+    pub fn commands(&self) -> Projected<'e> {
+        Projected { commands: self.front.commands(), transform: self.transform }
     }
 
     /// The beam settings.
@@ -433,19 +428,31 @@ impl<'e> Screen<'e, '_> {
     }
 }
 
-fn frame<'e>(
-    list: &'e ScreenList<'_>,
-    beam: &BeamConfig,
-) -> Scheduler<impl Iterator<Item = Command<ScreenPoint>> + 'e> {
-    Scheduler::new(list.commands(), beam)
+/// The picture's commands projected on the screen (nothing without a
+/// picture).
+#[derive(Debug, Clone)]
+pub struct Projected<'e> {
+    commands: Commands<'e, 'e>,
+    transform: Option<ViewTransform>,
+}
+
+impl Iterator for Projected<'_> {
+    type Item = Command<ScreenPoint>;
+
+    #[inline]
+    fn next(&mut self) -> Option<Command<ScreenPoint>> {
+        let t = self.transform?;
+        self.commands.next().map(|c| c.map(|p| t.project(p)))
+    }
 }
 
 /// The receiving half of an [`Engine`] ([`Engine::split`]): feeding bytes
-/// while the display list is being drawn.
+/// while the picture is being drawn.
 #[derive(Debug)]
 pub struct Link<'e, 'a> {
     decoder: &'e mut ProtocolDecoder,
     dev: &'e mut Device<'a>,
+    back: &'e mut Geometry<'a>,
 }
 
 impl<'a> Engine<'a> {
@@ -460,23 +467,22 @@ impl<'a> Engine<'a> {
             Bounds { min: Point3::new(0.0, 0.0, 0.0), max: Point3::new(1.0, 1.0, 1.0) },
         )
         .map_err(EngineError::View)?;
-        let Buffers { slices, rows, geometry: [(p0, k0), (p1, k1)], screen, scratch } = buffers;
+        let Buffers { slices, rows, front, back, scratch } = buffers;
         let stream = Stream::new(slices, rows);
-        let list = DisplayStore::with_storage(screen.0, screen.1);
-        let mut scratch = scratch;
-        if stream.slice_capacity() < 16 || stream.row_capacity() < 2 || !scratch.fits(list.capacity()) {
+        if stream.slice_capacity() < 16 || stream.row_capacity() < 2 {
             return Err(EngineError::Buffers);
         }
-        let display_capacity = list.capacity();
+        let front = Geometry::new(front.0, front.1);
+        let back = Geometry::new(back.0, back.1);
+        let display_capacity = front.capacity().min(back.capacity());
         Ok(Self {
             decoder: ProtocolDecoder::new(),
             dev: Device {
                 cfg,
                 session: Session::new(),
                 stream,
-                geometry: [Geometry::new(p0, k0), Geometry::new(p1, k1)],
-                front: 0,
                 shown: None,
+                commit: false,
                 view: cfg.view,
                 spin_deg_per_s: 0.0,
                 spin_epoch_ms: 0,
@@ -490,7 +496,10 @@ impl<'a> Engine<'a> {
                 events: Deque::new(),
                 counters: Counters::default(),
             },
-            list,
+            front,
+            back,
+            transform: None,
+            chain: ChainStats::default(),
             scratch,
             generation: 0,
         })
@@ -500,8 +509,8 @@ impl<'a> Engine<'a> {
     /// can play frames while bytes are fed. What the bytes change (a new
     /// volume, view or beam) shows after the next [`Engine::update`].
     pub fn split(&mut self) -> (Link<'_, 'a>, Screen<'_, 'a>) {
-        let beam = self.dev.beam;
-        (Link { decoder: &mut self.decoder, dev: &mut self.dev }, Screen { list: &self.list, beam })
+        let screen = Screen { front: &self.front, transform: self.transform, beam: self.dev.beam };
+        (Link { decoder: &mut self.decoder, dev: &mut self.dev, back: &mut self.back }, screen)
     }
 
     /// Take received bytes at time `now_ms`: see [`Link::feed`].
@@ -519,28 +528,77 @@ impl<'a> Engine<'a> {
         self.dev.events.pop_front()
     }
 
-    /// Between frames: abandon a stalled transfer, turn a spinning view, and
-    /// rebuild the display list if the picture or the view changed. Returns
-    /// whether the display list changed.
+    /// Between frames: abandon a stalled transfer; make a complete volume
+    /// the picture (stitch and order it, in the idle slice buffers); fit a
+    /// new or spinning view. Returns whether the picture changed.
     pub fn update(&mut self, now_ms: u32) -> bool {
         self.dev.check_timeout(now_ms);
-        let spinning = self.dev.spin_deg_per_s != 0.0 && self.dev.shown.is_some();
-        if !(self.dev.dirty || spinning) {
-            return false;
+        let mut changed = false;
+        if self.dev.commit {
+            self.commit();
+            changed = true;
         }
-        self.dev.dirty = false;
-        self.rebuild(now_ms);
-        true
+        let spinning = self.dev.spin_deg_per_s != 0.0 && self.dev.shown.is_some();
+        if changed || self.dev.dirty || spinning {
+            // A spin alone only turns the view; anything else counts the
+            // frame again (a pass of the scheduler).
+            let count = changed || self.dev.dirty;
+            self.dev.dirty = false;
+            self.fit(now_ms);
+            if count {
+                self.count();
+            }
+            self.generation = self.generation.wrapping_add(1);
+            changed = true;
+        }
+        changed
     }
 
-    /// Project the surface on screen under the current view, cull, stitch,
-    /// merge and order it.
-    fn rebuild(&mut self, now_ms: u32) {
+    /// The received surface becomes the picture.
+    fn commit(&mut self) {
         let dev = &mut self.dev;
-        self.list.clear();
-        self.list.reset_counters();
-        self.generation = self.generation.wrapping_add(1);
-        let Some(shown) = dev.shown else { return };
+        dev.commit = false;
+        let Some(spec) = dev.shown else { return };
+        // Merge within the tolerance at the largest scale a view can give:
+        // the bounding sphere's fit, times the longest voxel side, doubled.
+        let tolerance = Bounds::of_volume(spec.dims[0].into(), spec.dims[1].into(), spec.dims[2].into())
+            .and_then(|b| {
+                ViewTransform::fit_sphere(&View { spacing: spec.spacing, bits: dev.beam.bits, ..dev.view }, b)
+            })
+            .map_or(0.0, |t| {
+                let side = spec.spacing.iter().fold(0.0f32, |m, &s| m.max(s));
+                dev.cfg.optimize.tolerance / (2.0 * t.scale() * side)
+            });
+        let slices = dev.stream.idle_scratch().unwrap_or(&mut []);
+        let scratch = if slices.len() >= self.scratch.len() { slices } else { &mut *self.scratch };
+        // Stitch the fragments into maximal polylines (into the front),
+        // then order those for short jumps (back into the back), and make
+        // that the front.
+        let stitched = chain::chain(&self.back, &mut self.front, scratch, [0; 3], 0.0, Pass::Stitch);
+        let ordered = chain::chain(&self.front, &mut self.back, scratch, [0; 3], tolerance, Pass::Order);
+        core::mem::swap(&mut self.front, &mut self.back);
+        self.back.reset(self.back.shift());
+        self.chain = ChainStats {
+            fragments: stitched.fragments,
+            points_in: stitched.points_in,
+            ordered: stitched.ordered && ordered.ordered,
+            duplicate_segments: stitched.duplicate_segments,
+            culled_dots: stitched.culled_dots,
+            ..ordered
+        };
+        if let Some(s) = dev.shown.as_mut() {
+            s.points = self.front.len() as u32;
+        }
+        dev.status_due = true;
+    }
+
+    /// Fit the view to the picture at time `now_ms` (for the spin).
+    fn fit(&mut self, now_ms: u32) {
+        let dev = &self.dev;
+        let Some(shown) = dev.shown else {
+            self.transform = None;
+            return;
+        };
         let elapsed_s = now_ms.wrapping_sub(dev.spin_epoch_ms) as f32 / 1000.0;
         let turn = libm::fmodf(dev.spin_deg_per_s * elapsed_s, 360.0);
         let view = View { spacing: shown.spacing, bits: dev.beam.bits, ..dev.view }.yawed(turn);
@@ -553,20 +611,22 @@ impl<'a> Engine<'a> {
                 ViewTransform::fit(&view, b)
             }
         });
-        let Ok(vt) = fitted else { return };
-        for c in dev.geometry.get(dev.front).into_iter().flat_map(Geometry::commands) {
-            let _ = self.list.push(c.map(|p| vt.project(p)));
+        if let Ok(t) = fitted {
+            self.transform = Some(t);
         }
-        self.list.optimize(&mut self.scratch, &dev.cfg.optimize);
-        let park = dev.beam.park_sample();
-        let start = ScreenPoint::new(f32::from(park.x), f32::from(park.y));
-        self.list.order(&mut self.scratch, &OrderConfig { start, ..dev.cfg.order });
-        let fps = frame_stats(self.list.commands(), &dev.beam).fps(dev.cfg.sample_rate_hz as f32);
+    }
+
+    /// Count one frame: the refresh rate and the blank share, reported.
+    fn count(&mut self) {
+        let stats = frame_stats(self.commands(), &self.dev.beam);
+        let dev = &mut self.dev;
+        let fps = stats.fps(dev.cfg.sample_rate_hz as f32);
         dev.refresh_centi_hz = (fps * 100.0).clamp(0.0, f32::from(u16::MAX)) as u16;
+        let blank = stats.blank_length / stats.lit_length.max(f32::MIN_POSITIVE);
         dev.event(Event::Redrawn {
-            polylines: self.list.polyline_count() as u32,
-            points: self.list.len() as u32,
-            dropped: self.list.dropped().min(u64::from(u32::MAX)) as u32,
+            polylines: self.front.polylines() as u32,
+            points: self.front.len() as u32,
+            blank_permille: (blank * 1000.0).clamp(0.0, 60000.0) as u16,
             refresh_centi_hz: dev.refresh_centi_hz,
         });
         if core::mem::take(&mut dev.status_due) {
@@ -574,21 +634,21 @@ impl<'a> Engine<'a> {
         }
     }
 
-    /// The display list on screen, in drawing order.
-    pub fn display(&self) -> &ScreenList<'a> {
-        &self.list
-    }
-
     /// One frame of the picture as the board plays it: the beam schedule of
-    /// the display list, from the park position back to it (blanked). The
-    /// board plays it over and over, and the park position between frames
-    /// when there is nothing to show. Every board (the firmware, the
-    /// simulator's virtual board) plays exactly these samples.
-    pub fn frame(&self) -> Scheduler<impl Iterator<Item = Command<ScreenPoint>> + '_> {
-        frame(&self.list, &self.dev.beam)
+    /// the picture's projected commands, from the park position back to it
+    /// (blanked). The board plays it over and over, and the park position
+    /// between frames when there is nothing to show. Every board (the
+    /// firmware, the simulator's virtual board) plays exactly these samples.
+    pub fn frame(&self) -> Scheduler<Projected<'_>> {
+        Scheduler::new(self.commands(), &self.dev.beam)
     }
 
-    /// Counts up each time the display list is rebuilt.
+    /// The picture's drawing commands on the screen, in drawing order.
+    pub fn commands(&self) -> Projected<'_> {
+        Projected { commands: self.front.commands(), transform: self.transform }
+    }
+
+    /// Counts up each time the picture changes.
     pub fn generation(&self) -> u32 {
         self.generation
     }
@@ -598,9 +658,14 @@ impl<'a> Engine<'a> {
         &self.dev.beam
     }
 
-    /// The surface on screen, in voxel coordinates.
+    /// The picture in voxel coordinates: stitched and ordered.
     pub fn surface(&self) -> Option<&Geometry<'a>> {
-        self.dev.shown.and(self.dev.geometry.get(self.dev.front))
+        self.dev.shown.and(Some(&self.front))
+    }
+
+    /// What stitching and ordering did to the last volume.
+    pub fn chain_stats(&self) -> ChainStats {
+        self.chain
     }
 
     /// What the engine is doing.
@@ -625,7 +690,7 @@ impl Link<'_, '_> {
                 None => {}
                 Some(Ok(msg)) => {
                     self.dev.counters.frames = self.dev.counters.frames.wrapping_add(1);
-                    self.dev.handle(msg, now_ms);
+                    self.dev.handle(msg, now_ms, self.back);
                 }
                 Some(Err(error)) => {
                     self.dev.counters.frame_errors = self.dev.counters.frame_errors.wrapping_add(1);
@@ -705,7 +770,7 @@ impl Device<'_> {
 
     fn status(&mut self) {
         let slices = self.stream.transfer.map_or(0, |t| t.z);
-        let points = self.geometry.get(self.front).map_or(0, |g| g.len() as u32);
+        let points = self.shown.map_or(0, |s| s.points);
         let msg = Message::Status {
             seq: self.session.last(),
             state: self.state(),
@@ -732,7 +797,7 @@ impl Device<'_> {
         }
     }
 
-    fn handle(&mut self, msg: Message<'_>, now_ms: u32) {
+    fn handle(&mut self, msg: Message<'_>, now_ms: u32, back: &mut Geometry<'_>) {
         let seq = match msg {
             Message::Hello { protocol, .. } => {
                 self.abort(AbortReason::Restarted);
@@ -765,7 +830,7 @@ impl Device<'_> {
         };
         match self.session.standing(seq) {
             Standing::Next => {
-                let answer = self.apply(msg, now_ms).err();
+                let answer = self.apply(msg, now_ms, back).err();
                 self.session.answered(seq, answer);
                 self.answer(seq, answer);
             }
@@ -782,7 +847,13 @@ impl Device<'_> {
     }
 
     /// Apply the next command.
-    fn apply(&mut self, msg: Message<'_>, now_ms: u32) -> Result<(), NackCode> {
+    fn apply(&mut self, msg: Message<'_>, now_ms: u32, back: &mut Geometry<'_>) -> Result<(), NackCode> {
+        let volume_data = matches!(msg, Message::BeginVolume { .. } | Message::SliceData { .. });
+        if volume_data && self.commit {
+            // The last volume is not the picture yet (the next update makes
+            // it so, between frames); its surface is still in the back.
+            return Err(NackCode::Busy);
+        }
         match msg {
             Message::BeginVolume { dims, sample_type, spacing, levels, axes, every, .. } => {
                 self.abort(AbortReason::Superseded);
@@ -792,15 +863,12 @@ impl Device<'_> {
                     return Err(NackCode::Invalid);
                 }
                 spec.check(self.stream.slice_capacity(), self.stream.row_capacity())?;
-                if let Some(g) = self.geometry.get_mut(1 - self.front) {
-                    g.clear();
-                }
+                back.reset(Geometry::shift_for(dims));
                 self.stream.begin(spec, now_ms);
                 self.event(Event::Begun { dims, sample_type, levels: levels.len() as u8 });
                 Ok(())
             }
             Message::SliceData { slice, offset, data, .. } => {
-                let back = self.geometry.get_mut(1 - self.front).ok_or(NackCode::Busy)?;
                 self.stream.chunk(slice, offset, data, now_ms, back)
             }
             Message::EndVolume { .. } => {
@@ -810,17 +878,13 @@ impl Device<'_> {
                     return Err(NackCode::Missing);
                 }
                 self.stream.transfer = None;
-                self.front = 1 - self.front;
-                self.shown = Some(Shown { dims: t.spec.dims, spacing: t.spec.spacing });
-                self.dirty = true;
-                self.status_due = true;
+                self.shown = Some(Shown { dims: t.spec.dims, spacing: t.spec.spacing, points: 0 });
+                self.commit = true;
                 self.counters.volumes = self.counters.volumes.wrapping_add(1);
-                let (commands, dropped) =
-                    self.geometry.get(self.front).map_or((0, 0), |g| (g.len() as u32, g.dropped()));
                 self.event(Event::Committed {
                     dims: t.spec.dims,
-                    commands,
-                    dropped,
+                    commands: back.len() as u32,
+                    dropped: back.dropped(),
                     nonfinite_cells: t.stats.nonfinite_cells.min(u64::from(u32::MAX)) as u32,
                 });
                 Ok(())

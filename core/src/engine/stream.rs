@@ -74,7 +74,8 @@ pub(crate) struct Transfer {
 /// The two slices, the decoded rows and the transfer state.
 #[derive(Debug)]
 pub(crate) struct Stream<'a> {
-    slots: [&'a mut [u8]; 2],
+    /// Both slices: the first and the second half.
+    slots: &'a mut [u8],
     rows: [&'a mut [f32]; 2],
     /// The slot receiving slice `z`; the other holds slice `z - 1`.
     cur: usize,
@@ -110,13 +111,26 @@ fn decode(ty: SampleType, bytes: &[u8], start: usize, stride: usize, out: &mut [
 }
 
 impl<'a> Stream<'a> {
-    pub(crate) fn new(slots: [&'a mut [u8]; 2], rows: [&'a mut [f32]; 2]) -> Self {
+    pub(crate) fn new(slots: &'a mut [u8], rows: [&'a mut [f32]; 2]) -> Self {
         Self { slots, rows, cur: 0, transfer: None }
     }
 
     /// Bytes one slice may hold.
     pub(crate) fn slice_capacity(&self) -> usize {
-        self.slots.iter().map(|s| s.len()).min().unwrap_or(0)
+        self.slots.len() / 2
+    }
+
+    /// The slice buffers as scratch, while no transfer needs them.
+    pub(crate) fn idle_scratch(&mut self) -> Option<&mut [u8]> {
+        if self.transfer.is_some() { None } else { Some(self.slots) }
+    }
+
+    /// The two slots: (current, previous).
+    fn halves(&mut self) -> (&mut [u8], &mut [u8]) {
+        let half = self.slice_capacity();
+        let (a, rest) = self.slots.split_at_mut(half);
+        let b = rest.get_mut(..half).unwrap_or(&mut []);
+        if self.cur == 0 { (a, b) } else { (b, a) }
     }
 
     /// Samples one row may hold.
@@ -141,7 +155,7 @@ impl<'a> Stream<'a> {
         now_ms: u32,
         geometry: &mut Geometry<'_>,
     ) -> Result<(), NackCode> {
-        let t = self.transfer.as_mut().ok_or(NackCode::Aborted)?;
+        let t = self.transfer.ok_or(NackCode::Aborted)?;
         let slice_bytes = t.spec.slice_bytes();
         if slice >= t.spec.dims[2] {
             return Err(NackCode::Invalid);
@@ -157,22 +171,23 @@ impl<'a> Stream<'a> {
         if data.is_empty() || end > slice_bytes {
             return Err(NackCode::Invalid);
         }
-        let [a, b] = &mut self.slots;
-        let slot = if self.cur == 0 { a } else { b };
+        let (slot, _) = self.halves();
         slot.get_mut(start..end).ok_or(NackCode::DimsOverCapacity)?.copy_from_slice(data);
-        t.last_ms = now_ms;
-        if end < slice_bytes {
-            t.offset = end as u32;
-            return Ok(());
-        }
-        let (spec, z) = (t.spec, t.z);
-        let stats = self.contour(&spec, z, geometry);
+        let complete = end == slice_bytes;
+        let stats = if complete { self.contour(&t.spec, t.z, geometry) } else { ContourStats::default() };
         if let Some(t) = self.transfer.as_mut() {
-            t.stats += stats;
-            t.z += 1;
-            t.offset = 0;
+            t.last_ms = now_ms;
+            if complete {
+                t.stats += stats;
+                t.z += 1;
+                t.offset = 0;
+            } else {
+                t.offset = end as u32;
+            }
         }
-        self.cur = 1 - self.cur;
+        if complete {
+            self.cur = 1 - self.cur;
+        }
         Ok(())
     }
 
@@ -185,7 +200,8 @@ impl<'a> Stream<'a> {
         };
         let [nx, ny] = [usize::from(spec.dims[0]), usize::from(spec.dims[1])];
         let ty = spec.sample_type;
-        let [s0, s1] = &self.slots;
+        let half = self.slots.len() / 2;
+        let (s0, s1) = self.slots.split_at(half);
         let (cur, prev): (&[u8], &[u8]) = if self.cur == 0 { (s0, s1) } else { (s1, s0) };
         let [r0, r1] = &mut self.rows;
         let (Some(mut lo), Some(mut hi)) = (r0.get_mut(..nx.max(ny)), r1.get_mut(..nx.max(ny))) else {

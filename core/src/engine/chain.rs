@@ -1,0 +1,738 @@
+//! Stitching and ordering a received surface in 3D, in little memory.
+//!
+//! Two passes over the contour fragments (two or three points each, one per
+//! subgrid), each from one [`Geometry`] into the other:
+//!
+//! 1. [`Pass::Stitch`]: what would be drawn twice is culled (the paper's
+//!    section 4.1: an equal-valued edge on a border two subgrids share, a
+//!    dot where a line is), then fragments are walked into maximal
+//!    polylines: from the ends of open paths (points where an odd number of
+//!    ends meet) first, then around closed loops, going on only through a
+//!    fragment that starts exactly where the walk stands (crossings on
+//!    shared edges are bit-identical), the straightest one first.
+//! 2. [`Pass::Order`]: from where the beam stands, the nearest polyline end
+//!    (or, for a closed loop, the nearest of its vertices: a loop is entered
+//!    anywhere) is drawn next; runs of nearly collinear points are merged
+//!    on the way.
+//!
+//! The order is made in voxel space, once per volume: any view then draws it
+//! with no more blanked travel than the 3D tour, scaled (a projection never
+//! lengthens a jump), so a new or spinning view needs no re-ordering.
+//!
+//! Memory, in caller scratch (the engine lends the slice buffers, idle
+//! between volumes): the fragment starts, a grid of ends (a singly linked
+//! list per cell, one link per point), all `u32`: about 6.6 bytes a point.
+//! Time: `O(n)` to build, and per fragment a search of the cells within two
+//! rings of the beam, else the next non-empty cell in scan order (a cursor
+//! that only moves on, `O(cells)` in all).
+
+use super::geometry::{Geometry, Kind, Packed};
+
+/// No entry.
+const NONE: u32 = u32::MAX;
+/// The top bit of a fragment's start: drawn already.
+const DRAWN: u32 = 1 << 31;
+/// Rings of cells searched around the beam.
+const RINGS: i32 = 2;
+/// Dropped points remembered to check a merged chord against.
+const MERGE_SPAN: usize = 8;
+
+/// What [`chain`] did.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ChainStats {
+    /// Fragments in.
+    pub fragments: u32,
+    /// Polylines (and dots) out.
+    pub polylines: u32,
+    /// Points in.
+    pub points_in: u32,
+    /// Points out.
+    pub points_out: u32,
+    /// Closed loops among the polylines.
+    pub loops: u32,
+    /// Points removed by merging collinear runs.
+    pub merged: u32,
+    /// One-segment fragments drawn twice, culled.
+    pub duplicate_segments: u32,
+    /// Dots culled (on a line, or drawn twice).
+    pub culled_dots: u32,
+    /// Blanked travel between polylines, in voxels.
+    pub travel: f32,
+    /// False when the scratch was too small: the fragments were copied in
+    /// the order they came.
+    pub ordered: bool,
+}
+
+/// How [`chain`] picks the next fragment.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Pass {
+    /// Cull, then walk maximal polylines.
+    Stitch,
+    /// Short jumps, merging collinear runs.
+    Order,
+}
+
+/// `u32` words over a byte buffer (the scratch is lent as bytes).
+struct Words<'s>(&'s mut [u8]);
+
+impl Words<'_> {
+    fn len(&self) -> usize {
+        self.0.len() / 4
+    }
+
+    #[inline]
+    fn get(&self, i: usize) -> u32 {
+        self.0.get(4 * i..4 * i + 4).and_then(|b| b.try_into().ok()).map_or(NONE, u32::from_le_bytes)
+    }
+
+    #[inline]
+    fn set(&mut self, i: usize, v: u32) {
+        if let Some(b) = self.0.get_mut(4 * i..4 * i + 4) {
+            b.copy_from_slice(&v.to_le_bytes());
+        }
+    }
+}
+
+fn dist2(a: Packed, b: Packed) -> u64 {
+    a.iter()
+        .zip(b)
+        .map(|(&a, b)| {
+            let d = i64::from(a) - i64::from(b);
+            (d * d) as u64
+        })
+        .sum()
+}
+
+/// Cell coordinates of `q` in a grid of `n` cells of `2^bits` codes.
+fn cell_coords(q: Packed, n: [u32; 3], bits: u32) -> [u32; 3] {
+    let [x, y, z] = q;
+    let [nx, ny, nz] = n;
+    let c = |v: u16, n: u32| (u32::from(v) >> bits).min(n.saturating_sub(1));
+    [c(x, nx), c(y, ny), c(z, nz)]
+}
+
+/// The fragments of a geometry and a grid of their ends. An end is a point
+/// index: the first and last point of an open fragment, the point of a dot,
+/// every vertex of a closed loop (in the order pass).
+struct Index<'s, 'g, 'a> {
+    src: &'g Geometry<'a>,
+    w: Words<'s>,
+    /// Cells along x, y, z; a cell is `2^bits` codes on a side.
+    n: [u32; 3],
+    bits: u32,
+    /// Word offsets: fragment starts (`frags` of them), cell heads, and one
+    /// link per point.
+    heads: usize,
+    links: usize,
+    frags: usize,
+    /// Closed loops may be entered at any vertex.
+    any_vertex: bool,
+}
+
+impl<'s, 'g, 'a> Index<'s, 'g, 'a> {
+    fn build(src: &'g Geometry<'a>, scratch: &'s mut [u8], any_vertex: bool) -> Option<Self> {
+        let mut w = Words(scratch);
+        let points = src.len();
+        let mut frags = 0usize;
+        let mut top = [0u16; 3];
+        for i in 0..points {
+            let (q, kind) = src.get(i)?;
+            for (t, v) in top.iter_mut().zip(q) {
+                *t = (*t).max(v);
+            }
+            if kind.starts() || i == 0 {
+                frags += 1;
+            }
+        }
+        let words = w.len();
+        if frags == 0 || points >= DRAWN as usize || words < frags + points + 1 {
+            return None;
+        }
+        // The finest grid with at most one cell per two fragments (and what
+        // the scratch holds).
+        let budget = ((words - frags - points) as u64).min((frags as u64 / 2).max(1));
+        let cells_at = |b: u32| -> u64 { top.iter().map(|&t| u64::from((u32::from(t) >> b) + 1)).product() };
+        let mut bits = 0u32;
+        while bits < 16 && cells_at(bits) > budget {
+            bits += 1;
+        }
+        let n = top.map(|t| (u32::from(t) >> bits) + 1);
+        let heads = frags;
+        let cells = n.iter().map(|&c| c as usize).product::<usize>();
+        let links = heads + cells;
+        if links + points > words {
+            return None;
+        }
+        let mut k = 0;
+        for i in 0..points {
+            if src.get(i).is_some_and(|(_, kind)| kind.starts()) || i == 0 {
+                w.set(k, i as u32);
+                k += 1;
+            }
+        }
+        for c in 0..cells {
+            w.set(heads + c, NONE);
+        }
+        let mut index = Self { src, w, n, bits, heads, links, frags, any_vertex };
+        for f in 0..frags {
+            let (from, to) = index.span(f);
+            for i in from..to {
+                if index.is_end(f, i) {
+                    index.link(i);
+                }
+            }
+        }
+        Some(index)
+    }
+
+    fn cells(&self) -> usize {
+        self.n.iter().map(|&n| n as usize).product()
+    }
+
+    fn cell(&self, q: Packed) -> usize {
+        let [cx, cy, cz] = cell_coords(q, self.n, self.bits).map(|c| c as usize);
+        let [nx, ny, _] = self.n.map(|n| n as usize);
+        cx + nx * (cy + ny * cz)
+    }
+
+    fn point(&self, i: usize) -> Packed {
+        self.src.get(i).map_or([0; 3], |(q, _)| q)
+    }
+
+    fn kind(&self, i: usize) -> Kind {
+        self.src.get(i).map_or(Kind::Line, |(_, k)| k)
+    }
+
+    fn drawn(&self, f: usize) -> bool {
+        self.w.get(f) & DRAWN != 0
+    }
+
+    /// The point range of fragment `f`.
+    fn span(&self, f: usize) -> (usize, usize) {
+        let from = (self.w.get(f) & !DRAWN) as usize;
+        let to = if f + 1 < self.frags { (self.w.get(f + 1) & !DRAWN) as usize } else { self.src.len() };
+        (from, to.max(from + 1).min(self.src.len().max(from + 1)))
+    }
+
+    /// The fragment holding point `i`.
+    fn frag_of(&self, i: usize) -> usize {
+        let (mut lo, mut hi) = (0, self.frags);
+        while hi - lo > 1 {
+            let mid = (lo + hi) / 2;
+            if (self.w.get(mid) & !DRAWN) as usize <= i {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        lo
+    }
+
+    fn is_loop(&self, f: usize) -> bool {
+        self.kind(self.span(f).0) == Kind::Loop
+    }
+
+    fn is_dot(&self, f: usize) -> bool {
+        self.kind(self.span(f).0) == Kind::Dot
+    }
+
+    /// Whether point `i` of fragment `f` is one of its ends.
+    fn is_end(&self, f: usize, i: usize) -> bool {
+        let (from, to) = self.span(f);
+        i == from || i + 1 == to || (self.any_vertex && self.is_loop(f))
+    }
+
+    fn link(&mut self, i: usize) {
+        let c = self.cell(self.point(i));
+        let head = self.w.get(self.heads + c);
+        self.w.set(self.links + i, head);
+        self.w.set(self.heads + c, i as u32);
+    }
+
+    fn unlink(&mut self, i: usize) {
+        let c = self.cell(self.point(i));
+        let mut prev = NONE;
+        let mut at = self.w.get(self.heads + c);
+        while at != NONE {
+            let next = self.w.get(self.links + at as usize);
+            if at as usize == i {
+                if prev == NONE {
+                    self.w.set(self.heads + c, next);
+                } else {
+                    self.w.set(self.links + prev as usize, next);
+                }
+                return;
+            }
+            prev = at;
+            at = next;
+        }
+    }
+
+    /// Mark fragment `f` drawn and take its ends out of the grid.
+    fn take(&mut self, f: usize) {
+        let (from, to) = self.span(f);
+        for i in from..to {
+            if self.is_end(f, i) {
+                self.unlink(i);
+            }
+        }
+        let s = self.w.get(f);
+        self.w.set(f, s | DRAWN);
+    }
+
+    /// The ends in `q`'s cell (any point), by calling `visit` until it says
+    /// stop.
+    fn each_end(&self, c: usize, mut visit: impl FnMut(usize) -> bool) {
+        let mut at = self.w.get(self.heads + c);
+        while at != NONE {
+            if !visit(at as usize) {
+                return;
+            }
+            at = self.w.get(self.links + at as usize);
+        }
+    }
+
+    /// How many fragment ends lie exactly at `q` (a dot counts twice: a
+    /// path passes through it).
+    fn degree(&self, q: Packed) -> usize {
+        let mut n = 0;
+        self.each_end(self.cell(q), |i| {
+            if self.point(i) == q {
+                n += if self.kind(i) == Kind::Dot { 2 } else { 1 };
+            }
+            true
+        });
+        n
+    }
+
+    /// Of the ends exactly at `cur`, the one whose fragment goes on
+    /// straightest from `prev -> cur`.
+    fn straightest(&self, cur: Packed, prev: Option<Packed>) -> Option<usize> {
+        let v = |q: Packed| [f32::from(q[0]), f32::from(q[1]), f32::from(q[2])];
+        let unit = |a: Packed, b: Packed| {
+            let (a, b) = (v(a), v(b));
+            let d = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+            let n = libm::sqrtf(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+            if n > 0.0 { [d[0] / n, d[1] / n, d[2] / n] } else { [0.0; 3] }
+        };
+        let dir_in = prev.map(|p| unit(p, cur));
+        let mut best: Option<(f32, usize)> = None;
+        self.each_end(self.cell(cur), |i| {
+            if self.point(i) == cur && self.kind(i) != Kind::Dot {
+                let (from, to) = self.span(self.frag_of(i));
+                let next = if i == from { (from + 1).min(to - 1) } else { i.saturating_sub(1).max(from) };
+                let score = dir_in.map_or(0.0, |d| {
+                    let u = unit(cur, self.point(next));
+                    d[0] * u[0] + d[1] * u[1] + d[2] * u[2]
+                });
+                if best.is_none_or(|(s, _)| score > s) {
+                    best = Some((score, i));
+                }
+            }
+            true
+        });
+        best.map(|(_, i)| i)
+    }
+
+    /// The end nearest `cur` within [`RINGS`] rings of cells.
+    fn nearest(&self, cur: Packed) -> Option<usize> {
+        let [cx, cy, cz] = cell_coords(cur, self.n, self.bits).map(|c| c as i32);
+        let [nx, ny, nz] = self.n.map(|n| n as i32);
+        let side = 1u64 << self.bits;
+        let mut best: Option<(u64, usize)> = None;
+        for r in 0..=RINGS {
+            for dz in -r..=r {
+                for dy in -r..=r {
+                    for dx in -r..=r {
+                        if dx.abs().max(dy.abs()).max(dz.abs()) != r {
+                            continue;
+                        }
+                        let (x, y, z) = (cx + dx, cy + dy, cz + dz);
+                        if !((0..nx).contains(&x) && (0..ny).contains(&y) && (0..nz).contains(&z)) {
+                            continue;
+                        }
+                        let cell = (x + nx * (y + ny * z)) as usize;
+                        self.each_end(cell, |i| {
+                            let d = dist2(cur, self.point(i));
+                            if best.is_none_or(|(bd, _)| d < bd) {
+                                best = Some((d, i));
+                            }
+                            d != 0
+                        });
+                        if best.is_some_and(|(d, _)| d == 0) {
+                            return best.map(|(_, i)| i);
+                        }
+                    }
+                }
+            }
+            // Anything in the next ring is at least r cells away.
+            if let Some((d, i)) = best {
+                let reach = r as u64 * side;
+                if d <= reach * reach {
+                    return Some(i);
+                }
+            }
+        }
+        best.map(|(_, i)| i)
+    }
+
+    /// The first end in a non-empty cell at or after the cursor (cells
+    /// before it are empty for good: ends are only ever taken out).
+    fn first_from(&self, scan: &mut usize) -> Option<usize> {
+        while *scan < self.cells() {
+            let at = self.w.get(self.heads + *scan);
+            if at != NONE {
+                return Some(at as usize);
+            }
+            *scan += 1;
+        }
+        None
+    }
+
+    /// Take out what would be drawn twice: a one-segment fragment equal to
+    /// another, and a dot where a line or another dot is.
+    fn cull(&mut self, stats: &mut ChainStats) {
+        for f in 0..self.frags {
+            if self.drawn(f) {
+                continue;
+            }
+            let (from, to) = self.span(f);
+            let (a, b) = (self.point(from), self.point(to - 1));
+            if self.is_dot(f) {
+                // Its own end counts 2.
+                if self.degree(a) > 2 {
+                    self.take(f);
+                    stats.culled_dots += 1;
+                }
+                continue;
+            }
+            if to - from != 2 || a == b {
+                continue;
+            }
+            loop {
+                let mut twin = None;
+                self.each_end(self.cell(a), |i| {
+                    let g = self.frag_of(i);
+                    if g != f && self.point(i) == a && !self.is_dot(g) && !self.is_loop(g) {
+                        let (f2, t2) = self.span(g);
+                        let other = if i == f2 { self.point(t2 - 1) } else { self.point(f2) };
+                        if t2 - f2 == 2 && other == b {
+                            twin = Some(g);
+                            return false;
+                        }
+                    }
+                    true
+                });
+                let Some(g) = twin else { break };
+                self.take(g);
+                stats.duplicate_segments += 1;
+            }
+        }
+    }
+}
+
+/// Chains `src` into `dst` (reset to `src`'s scale) as `pass` says; in the
+/// order pass, runs of points within `tolerance` voxels of their chord are
+/// merged (0: none). `start` is where the beam comes from. `scratch` should
+/// hold about 7 bytes a point; with less, the fragments are copied as they
+/// are.
+pub(crate) fn chain(
+    src: &Geometry<'_>,
+    dst: &mut Geometry<'_>,
+    scratch: &mut [u8],
+    start: Packed,
+    tolerance: f32,
+    pass: Pass,
+) -> ChainStats {
+    dst.reset(src.shift());
+    let mut stats = ChainStats { points_in: src.len() as u32, ..ChainStats::default() };
+    let Some(mut x) = Index::build(src, scratch, pass == Pass::Order) else {
+        copy(src, dst, &mut stats);
+        return stats;
+    };
+    stats.fragments = x.frags as u32;
+    stats.ordered = true;
+    let tol = if pass == Pass::Order { tolerance } else { 0.0 };
+    let mut walk = Walk { out: Out::new(tol, src.shift()), cur: start, prev: None };
+    match pass {
+        Pass::Order => {
+            let mut scan = 0;
+            for _ in 0..x.frags {
+                let Some(end) = x.nearest(walk.cur).or_else(|| x.first_from(&mut scan)) else { break };
+                walk.take(&mut x, dst, end, false, &mut stats);
+            }
+        }
+        Pass::Stitch => {
+            x.cull(&mut stats);
+            // Open paths first (from an end where an odd number meet), then
+            // what is left: closed loops.
+            for odd in [true, false] {
+                for f in 0..x.frags {
+                    if x.drawn(f) {
+                        continue;
+                    }
+                    let (from, to) = x.span(f);
+                    let last = to - 1;
+                    let end = if !odd || x.degree(x.point(from)) % 2 == 1 {
+                        from
+                    } else if x.degree(x.point(last)) % 2 == 1 {
+                        last
+                    } else {
+                        continue;
+                    };
+                    walk.take(&mut x, dst, end, false, &mut stats);
+                    while let Some(next) = x.straightest(walk.cur, walk.prev) {
+                        walk.take(&mut x, dst, next, true, &mut stats);
+                    }
+                    walk.out.finish(dst, &mut stats);
+                }
+            }
+        }
+    }
+    walk.out.finish(dst, &mut stats);
+    stats.points_out = dst.len() as u32;
+    stats
+}
+
+/// Copy `src` as it is.
+fn copy(src: &Geometry<'_>, dst: &mut Geometry<'_>, stats: &mut ChainStats) {
+    for i in 0..src.len() {
+        if let Some((q, kind)) = src.get(i) {
+            dst.push_raw(q, kind);
+            stats.polylines += u32::from(kind.starts());
+        }
+    }
+    stats.points_out = dst.len() as u32;
+}
+
+/// Where the beam is, and the chain being written.
+struct Walk {
+    out: Out,
+    /// The last point drawn, and the one before it.
+    cur: Packed,
+    prev: Option<Packed>,
+}
+
+impl Walk {
+    /// Draw the fragment of end `end`, entering there: a continuation of
+    /// the chain when it starts where the chain ends (and `join` allows, or
+    /// the ends meet exactly), else a new chain after a jump.
+    fn take(
+        &mut self,
+        x: &mut Index<'_, '_, '_>,
+        dst: &mut Geometry<'_>,
+        end: usize,
+        join: bool,
+        stats: &mut ChainStats,
+    ) {
+        let f = x.frag_of(end);
+        let (from, to) = x.span(f);
+        x.take(f);
+        let first = x.point(end);
+        if !(join || first == self.cur) || !self.out.open {
+            self.out.finish(dst, stats);
+            stats.travel += libm::sqrtf(dist2(first, self.cur) as f32) / f32::from(1u16 << x.src.shift());
+        }
+        let mut emit = |i: usize| {
+            let q = x.point(i);
+            self.out.point(dst, q, x.kind(i) == Kind::Dot, stats);
+            if self.cur != q {
+                self.prev = Some(self.cur);
+                self.cur = q;
+            }
+        };
+        if x.is_loop(f) {
+            // Entered at `end`: round to it again.
+            (end..to).chain(from..=end).for_each(&mut emit);
+        } else if end + 1 == to && end != from {
+            (from..to).rev().for_each(&mut emit);
+        } else {
+            (from..to).for_each(&mut emit);
+        }
+    }
+}
+
+/// The chain being written: merges collinear runs, closes loops.
+struct Out {
+    open: bool,
+    /// Index in `dst` of the chain's first point.
+    first: usize,
+    /// Merging: the last point kept for good, the last point written (it
+    /// may yet be merged away), and the points merged away since `kept`.
+    kept: Option<Packed>,
+    last: Option<Packed>,
+    dropped: [Packed; MERGE_SPAN],
+    n_dropped: usize,
+    tol2: f32,
+}
+
+impl Out {
+    fn new(tolerance: f32, shift: u8) -> Self {
+        let scale = f32::from(1u16 << shift);
+        let t = tolerance.max(0.0) * scale;
+        Self {
+            open: false,
+            first: 0,
+            kept: None,
+            last: None,
+            dropped: [[0; 3]; MERGE_SPAN],
+            n_dropped: 0,
+            tol2: if t.is_finite() { t * t } else { 0.0 },
+        }
+    }
+
+    /// Add a point to the chain (a dot is a chain of its own).
+    fn point(&mut self, dst: &mut Geometry<'_>, q: Packed, dot: bool, stats: &mut ChainStats) {
+        if dot {
+            self.finish(dst, stats);
+            if dst.push_raw(q, Kind::Dot) {
+                stats.polylines += 1;
+            }
+            return;
+        }
+        if !self.open {
+            self.open = true;
+            self.first = dst.len();
+            self.kept = None;
+            self.n_dropped = 0;
+            self.last = dst.push_raw(q, Kind::Move).then_some(q);
+            stats.polylines += 1;
+            return;
+        }
+        if self.last == Some(q) {
+            return; // the joint of two fragments
+        }
+        // Merge: drop `last` if it, and every point dropped since the kept
+        // one, lies within the tolerance of the chord kept -> q.
+        if let (Some(kept), Some(last)) = (self.kept, self.last) {
+            if self.tol2 > 0.0 && self.n_dropped < MERGE_SPAN {
+                let near = |p: Packed| chord_dist2(kept, q, p) <= self.tol2;
+                let dropped_ok = self.dropped.iter().take(self.n_dropped).all(|&p| near(p));
+                if near(last) && dropped_ok {
+                    dst.pop();
+                    if let Some(slot) = self.dropped.get_mut(self.n_dropped) {
+                        *slot = last;
+                    }
+                    self.n_dropped += 1;
+                    stats.merged += 1;
+                    self.last = dst.push_raw(q, Kind::Line).then_some(q);
+                    return;
+                }
+            }
+            self.kept = Some(last);
+        } else {
+            self.kept = self.last;
+        }
+        self.n_dropped = 0;
+        self.last = dst.push_raw(q, Kind::Line).then_some(q);
+    }
+
+    /// End the chain: a chain back at its first point is a closed loop.
+    fn finish(&mut self, dst: &mut Geometry<'_>, stats: &mut ChainStats) {
+        if !self.open {
+            return;
+        }
+        self.open = false;
+        let first = dst.get(self.first).map(|(q, _)| q);
+        let n = dst.len().saturating_sub(self.first);
+        if n == 1 {
+            // All its points fell on one code: nothing to draw.
+            dst.pop();
+            stats.polylines = stats.polylines.saturating_sub(1);
+            return;
+        }
+        if n >= 4 && first.is_some() && self.last == first {
+            dst.pop();
+            dst.close_at(self.first);
+            stats.loops += 1;
+        }
+    }
+}
+
+/// Squared distance from `p` to the segment `a`-`b` (fixed point codes).
+fn chord_dist2(a: Packed, b: Packed, p: Packed) -> f32 {
+    let v = |q: Packed| [f32::from(q[0]), f32::from(q[1]), f32::from(q[2])];
+    let (a, b, p) = (v(a), v(b), v(p));
+    let ab = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+    let ap = [p[0] - a[0], p[1] - a[1], p[2] - a[2]];
+    let len2 = ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2];
+    let t = if len2 > 0.0 {
+        ((ap[0] * ab[0] + ap[1] * ab[1] + ap[2] * ab[2]) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let d = [ap[0] - t * ab[0], ap[1] - t * ab[1], ap[2] - t * ab[2]];
+    d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::command::{Command, Point3};
+
+    fn store(n: usize) -> (Vec<Packed>, Vec<u8>) {
+        (vec![[0; 3]; n], vec![0; n.div_ceil(4)])
+    }
+
+    fn seg(g: &mut Geometry<'_>, a: [f32; 3], b: [f32; 3]) {
+        g.push(Command::MoveTo(Point3::new(a[0], a[1], a[2]))).unwrap();
+        g.push(Command::LineTo(Point3::new(b[0], b[1], b[2]))).unwrap();
+    }
+
+    #[test]
+    fn a_square_of_four_fragments_in_any_order_becomes_one_closed_loop() {
+        let (mut p, mut k) = store(16);
+        let mut src = Geometry::new(&mut p, &mut k);
+        src.reset(8);
+        // Shuffled and with two fragments backwards.
+        seg(&mut src, [1.0, 0.0, 0.0], [1.0, 1.0, 0.0]);
+        seg(&mut src, [0.0, 1.0, 0.0], [0.0, 0.0, 0.0]);
+        seg(&mut src, [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]);
+        seg(&mut src, [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]);
+        let (mut p2, mut k2) = store(16);
+        let mut dst = Geometry::new(&mut p2, &mut k2);
+        let mut scratch = [0u8; 256];
+        let st = chain(&src, &mut dst, &mut scratch, [0; 3], 0.0, Pass::Order);
+        assert!(st.ordered);
+        assert_eq!((st.fragments, st.polylines, st.loops, st.points_out), (4, 1, 1, 4));
+        assert_eq!(st.travel, 0.0);
+        let cmds: Vec<_> = dst.commands().collect();
+        assert_eq!(cmds.len(), 5);
+        assert_eq!(cmds[0], Command::MoveTo(Point3::new(0.0, 0.0, 0.0)));
+        assert_eq!(cmds[4], Command::LineTo(Point3::new(0.0, 0.0, 0.0)));
+    }
+
+    #[test]
+    fn collinear_points_merge_within_tolerance_only() {
+        let (mut p, mut k) = store(16);
+        let mut src = Geometry::new(&mut p, &mut k);
+        src.reset(8);
+        seg(&mut src, [0.0, 0.0, 0.0], [1.0, 0.001, 0.0]);
+        seg(&mut src, [1.0, 0.001, 0.0], [2.0, 0.0, 0.0]);
+        seg(&mut src, [2.0, 0.0, 0.0], [2.0, 1.0, 0.0]);
+        let (mut p2, mut k2) = store(16);
+        let mut dst = Geometry::new(&mut p2, &mut k2);
+        let mut scratch = [0u8; 256];
+        let st = chain(&src, &mut dst, &mut scratch, [0; 3], 0.01, Pass::Order);
+        assert_eq!((st.polylines, st.merged, st.points_out), (1, 1, 3));
+        let st = chain(&src, &mut dst, &mut scratch, [0; 3], 0.0, Pass::Order);
+        assert_eq!((st.merged, st.points_out), (0, 4));
+    }
+
+    #[test]
+    fn too_little_scratch_copies_in_order() {
+        let (mut p, mut k) = store(16);
+        let mut src = Geometry::new(&mut p, &mut k);
+        src.reset(8);
+        seg(&mut src, [5.0, 0.0, 0.0], [6.0, 0.0, 0.0]);
+        seg(&mut src, [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]);
+        let (mut p2, mut k2) = store(16);
+        let mut dst = Geometry::new(&mut p2, &mut k2);
+        let st = chain(&src, &mut dst, &mut [0u8; 8], [0; 3], 0.0, Pass::Order);
+        assert!(!st.ordered);
+        let a: Vec<_> = src.commands().collect();
+        let b: Vec<_> = dst.commands().collect();
+        assert_eq!(a, b);
+    }
+}
