@@ -33,7 +33,7 @@ const NONE: u32 = u32::MAX;
 /// The top bit of a fragment's start: drawn already.
 const DRAWN: u32 = 1 << 31;
 /// Rings of cells searched around the beam.
-const RINGS: i32 = 2;
+const RINGS: i32 = 8;
 /// Dropped points remembered to check a merged chord against.
 const MERGE_SPAN: usize = 8;
 
@@ -149,9 +149,10 @@ impl<'s, 'g, 'a> Index<'s, 'g, 'a> {
         if frags == 0 || points >= DRAWN as usize || words < frags + points + 1 {
             return None;
         }
-        // The finest grid with at most one cell per two fragments (and what
-        // the scratch holds).
-        let budget = ((words - frags - points) as u64).min((frags as u64 / 2).max(1));
+        // The finest grid with about one cell per two ends (and what the
+        // scratch holds): two ends a fragment, or every point of the loops.
+        let ends = if any_vertex { points } else { 2 * frags };
+        let budget = ((words - frags - points) as u64).min((ends as u64 / 2).max(1));
         let cells_at = |b: u32| -> u64 { top.iter().map(|&t| u64::from((u32::from(t) >> b) + 1)).product() };
         let mut bits = 0u32;
         while bits < 16 && cells_at(bits) > budget {
