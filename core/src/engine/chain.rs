@@ -34,6 +34,9 @@ const NONE: u32 = u32::MAX;
 const DRAWN: u32 = 1 << 31;
 /// Rings of cells searched around the beam.
 const RINGS: i32 = 8;
+/// Steps a 2-opt move reverses at most (the tour is nearest-neighbour
+/// already: the gains are local).
+const WINDOW: usize = 48;
 /// Dropped points remembered to check a merged chord against.
 const MERGE_SPAN: usize = 8;
 
@@ -162,7 +165,10 @@ impl<'s, 'g, 'a> Index<'s, 'g, 'a> {
         let heads = frags;
         let cells = n.iter().map(|&c| c as usize).product::<usize>();
         let links = heads + cells;
-        if links + points > words {
+        // The order pass keeps its tour (fragment and entry point, two
+        // words a fragment) after the links.
+        let tour = if any_vertex { 2 * frags } else { 0 };
+        if links + points + tour > words {
             return None;
         }
         let mut k = 0;
@@ -458,10 +464,23 @@ pub(crate) fn chain(
     let mut walk = Walk { out: Out::new(tol, src.shift()), cur: start, prev: None };
     match pass {
         Pass::Order => {
+            // The tour: nearest neighbour, then 2-opt, then each loop entered
+            // at its best vertex; drawn last.
+            let mut tour = Tour { base: x.links + src.len(), len: 0 };
             let mut scan = 0;
+            let mut cur = start;
             for _ in 0..x.frags {
-                let Some(end) = x.nearest(walk.cur).or_else(|| x.first_from(&mut scan)) else { break };
-                walk.take(&mut x, dst, end, false, &mut stats);
+                let Some(end) = x.nearest(cur).or_else(|| x.first_from(&mut scan)) else { break };
+                let f = x.frag_of(end);
+                x.take(f);
+                tour.push(&mut x.w, f, end);
+                cur = exit(&x, f, end);
+            }
+            tour.two_opt(&mut x, start);
+            tour.best_entries(&mut x, start);
+            for k in 0..tour.len {
+                let (f, end) = tour.get(&x.w, k);
+                walk.emit(&x, dst, f, end, &mut stats);
             }
         }
         Pass::Stitch => {
@@ -507,6 +526,144 @@ fn copy(src: &Geometry<'_>, dst: &mut Geometry<'_>, stats: &mut ChainStats) {
     stats.points_out = dst.len() as u32;
 }
 
+/// Where the beam leaves fragment `f` entered at point `end`.
+fn exit(x: &Index<'_, '_, '_>, f: usize, end: usize) -> Packed {
+    let (from, to) = x.span(f);
+    if x.is_loop(f) {
+        x.point(end)
+    } else if end == from {
+        x.point(to - 1)
+    } else {
+        x.point(from)
+    }
+}
+
+/// The order pass's tour: per step, a fragment and the point it is entered
+/// at, in two words after the index's links.
+struct Tour {
+    base: usize,
+    len: usize,
+}
+
+impl Tour {
+    fn push(&mut self, w: &mut Words<'_>, f: usize, end: usize) {
+        w.set(self.base + 2 * self.len, f as u32);
+        w.set(self.base + 2 * self.len + 1, end as u32);
+        self.len += 1;
+    }
+
+    fn get(&self, w: &Words<'_>, k: usize) -> (usize, usize) {
+        (w.get(self.base + 2 * k) as usize, w.get(self.base + 2 * k + 1) as usize)
+    }
+
+    fn set(&self, w: &mut Words<'_>, k: usize, f: usize, end: usize) {
+        w.set(self.base + 2 * k, f as u32);
+        w.set(self.base + 2 * k + 1, end as u32);
+    }
+
+    /// Where step `k` is entered and left (`start` before the first step).
+    fn ends(&self, x: &Index<'_, '_, '_>, k: usize) -> (Packed, Packed) {
+        let (f, end) = self.get(&x.w, k);
+        (x.point(end), exit(x, f, end))
+    }
+
+    /// The other end of an open fragment (a loop and a dot keep theirs).
+    fn flipped(x: &Index<'_, '_, '_>, f: usize, end: usize) -> usize {
+        let (from, to) = x.span(f);
+        if x.is_loop(f) || from + 1 == to {
+            end
+        } else if end == from {
+            to - 1
+        } else {
+            from
+        }
+    }
+
+    /// 2-opt: reverse a run of up to [`WINDOW`] steps (each drawn the other
+    /// way) where that shortens the two jumps at its ends; first
+    /// improvement, until a pass finds none (at most 8 passes).
+    fn two_opt(&self, x: &mut Index<'_, '_, '_>, start: Packed) {
+        let n = self.len;
+        if n < 3 {
+            return;
+        }
+        let d = |a: Packed, b: Packed| libm::sqrtf(dist2(a, b) as f32);
+        // Bounded work: 8 passes of WINDOW moves a step.
+        let mut budget: u64 = 8 * WINDOW as u64 * n as u64;
+        let mut improved = true;
+        let mut passes = 0;
+        while improved && budget > 0 && passes < 8 {
+            passes += 1;
+            improved = false;
+            for i in 0..n - 1 {
+                // The jump into step i + 1 comes from step i's exit (or the
+                // start, for i = 0 meaning "before step 0" is not moved).
+                let out_i = self.ends(x, i).1;
+                let in_i1 = self.ends(x, i + 1).0;
+                let before = d(out_i, in_i1);
+                for j in i + 2..n.min(i + 2 + WINDOW) {
+                    budget = budget.saturating_sub(1);
+                    let out_j = self.ends(x, j).1;
+                    let after = if j + 1 < n { Some(self.ends(x, j + 1).0) } else { None };
+                    let old = before + after.map_or(0.0, |a| d(out_j, a));
+                    let new = d(out_i, out_j) + after.map_or(0.0, |a| d(in_i1, a));
+                    if new + 1e-3 < old {
+                        self.reverse(x, i + 1, j);
+                        improved = true;
+                        break;
+                    }
+                }
+                if budget == 0 {
+                    break;
+                }
+            }
+        }
+        let _ = start;
+    }
+
+    /// Reverse steps `a..=b`, each drawn the other way.
+    fn reverse(&self, x: &mut Index<'_, '_, '_>, mut a: usize, mut b: usize) {
+        while a < b {
+            let (fa, ea) = self.get(&x.w, a);
+            let (fb, eb) = self.get(&x.w, b);
+            let (na, nb) = (Self::flipped(x, fb, eb), Self::flipped(x, fa, ea));
+            self.set(&mut x.w, a, fb, na);
+            self.set(&mut x.w, b, fa, nb);
+            a += 1;
+            b -= 1;
+        }
+        if a == b {
+            let (f, e) = self.get(&x.w, a);
+            let n = Self::flipped(x, f, e);
+            self.set(&mut x.w, a, f, n);
+        }
+    }
+
+    /// Enter each closed loop at the vertex nearest the jumps around it.
+    fn best_entries(&self, x: &mut Index<'_, '_, '_>, start: Packed) {
+        let mut prev = start;
+        for k in 0..self.len {
+            let (f, end) = self.get(&x.w, k);
+            if x.is_loop(f) {
+                let next = if k + 1 < self.len { Some(self.ends(x, k + 1).0) } else { None };
+                let cost = |v: Packed| {
+                    libm::sqrtf(dist2(prev, v) as f32) + next.map_or(0.0, |n| libm::sqrtf(dist2(v, n) as f32))
+                };
+                let (from, to) = x.span(f);
+                let mut best = (cost(x.point(end)), end);
+                for i in from..to {
+                    let c = cost(x.point(i));
+                    if c < best.0 {
+                        best = (c, i);
+                    }
+                }
+                self.set(&mut x.w, k, f, best.1);
+            }
+            prev = self.ends(x, k).1;
+        }
+    }
+}
+
 /// Where the beam is, and the chain being written.
 struct Walk {
     out: Out,
@@ -516,9 +673,10 @@ struct Walk {
 }
 
 impl Walk {
-    /// Draw the fragment of end `end`, entering there: a continuation of
-    /// the chain when it starts where the chain ends (and `join` allows, or
-    /// the ends meet exactly), else a new chain after a jump.
+    /// Take and draw the fragment of end `end`, entering there: a
+    /// continuation of the chain when it starts where the chain ends (and
+    /// `join` allows, or the ends meet exactly), else a new chain after a
+    /// jump.
     fn take(
         &mut self,
         x: &mut Index<'_, '_, '_>,
@@ -528,8 +686,32 @@ impl Walk {
         stats: &mut ChainStats,
     ) {
         let f = x.frag_of(end);
-        let (from, to) = x.span(f);
         x.take(f);
+        self.draw(x, dst, f, end, join, stats);
+    }
+
+    /// Draw fragment `f` (already taken) entering at `end`.
+    fn emit(
+        &mut self,
+        x: &Index<'_, '_, '_>,
+        dst: &mut Geometry<'_>,
+        f: usize,
+        end: usize,
+        stats: &mut ChainStats,
+    ) {
+        self.draw(x, dst, f, end, false, stats);
+    }
+
+    fn draw(
+        &mut self,
+        x: &Index<'_, '_, '_>,
+        dst: &mut Geometry<'_>,
+        f: usize,
+        end: usize,
+        join: bool,
+        stats: &mut ChainStats,
+    ) {
+        let (from, to) = x.span(f);
         let first = x.point(end);
         if !(join || first == self.cur) || !self.out.open {
             self.out.finish(dst, stats);
