@@ -8,7 +8,7 @@
 //! | X | PA4 | DAC channel 1 (12 bits, output buffer on) |
 //! | Y | PA5 | DAC channel 2 |
 //! | blank (Z) | PB0 | GPIO, high = blanked (feature `blank-active-low` inverts) |
-//! | host link (later) | PA2 TX, PA3 RX | USART2 |
+//! | host link | PA2 TX, PA3 RX (pull-up) | USART2, AF7, 921,600 baud 8N1 ([`crate::serial`]) |
 //!
 //! # Output path
 //!
@@ -41,19 +41,24 @@
 //!
 //! The buffers are double-buffered halves: the DMA1 stream 5 half- and
 //! full-transfer interrupts tell the main loop which half to refill from
-//! the beam scheduler. A transfer error parks and blanks the beam and stops
-//! feeding the independent watchdog, which then resets the MCU.
+//! the beam scheduler ([`Streaming::fill_from`]; a frame may end inside a
+//! half, and the next frame continues it). A transfer error parks and
+//! blanks the beam and stops feeding the independent watchdog, which then
+//! resets the MCU.
 //!
 //! # Under QEMU (feature `qemu`)
 //!
 //! QEMU models neither the RCC (reads return 0, so the HAL's clock freeze
 //! would wait forever: it is not called) nor the DAC, DMA, GPIO or TIM6-8
-//! (it logs every access with `-d unimp`). The CPU writes each sample
-//! itself, in the same order and format: DHR12RD, then the blank pin's
-//! BSRR.
+//! (it logs every access with `-d unimp`). The same [`Streaming`] API
+//! hands out halves at once (no sample clock) and, while recording
+//! ([`Streaming::record`]), the CPU writes each sample itself, in the same
+//! order and format: DHR12RD, then the blank pin's BSRR. It models USART2
+//! (its second `-serial`) and SysTick (at 168 MHz, as the board).
 
+use crate::serial::{self, Rx, Tx};
 use isoscope_core::dac::{Beam, Sample};
-use stm32f4xx_hal::gpio::{Analog, Output, PinState, PushPull, gpioa, gpiob};
+use stm32f4xx_hal::gpio::{Alternate, Analog, Output, PinState, PushPull, gpioa, gpiob};
 use stm32f4xx_hal::pac;
 use stm32f4xx_hal::prelude::*;
 use stm32f4xx_hal::watchdog::IndependentWatchdog;
@@ -68,8 +73,16 @@ pub const BLANK_PIN: u32 = 0;
 pub const BLANK_ACTIVE_HIGH: bool = !cfg!(feature = "blank-active-low");
 
 /// Samples in one half of the double buffer: 512 us at 1 MS/s.
-#[cfg(not(feature = "qemu"))]
 pub const HALF: usize = 512;
+
+/// The host link's line rate (QEMU ignores it).
+pub const BAUD: u32 = 921_600;
+
+/// QEMU's netduinoplus2 clocks the core (and SysTick) at 168 MHz whatever
+/// the RCC is told; the HAL, reading the unmodelled RCC, would assume the
+/// 16 MHz reset clock.
+#[cfg(feature = "qemu")]
+const QEMU_CORE_HZ: u32 = 168_000_000;
 
 /// The DHR12RD word of a sample: X (channel 1) in bits 0..12, Y (channel 2)
 /// in bits 16..28.
@@ -105,6 +118,13 @@ pub struct Board {
     pub watchdog: IndependentWatchdog,
     /// Core clock, Hz.
     pub sysclk_hz: u32,
+    /// USART2's bus clock (APB1), Hz.
+    pub pclk1_hz: u32,
+    /// The host link: received bytes.
+    pub rx: Rx,
+    /// The host link: bytes to send.
+    pub tx: Tx,
+    _link_pins: (gpioa::PA2<Alternate<7>>, gpioa::PA3<Alternate<7>>),
 }
 
 /// The output pins; owning them keeps anyone else from reconfiguring them.
@@ -114,10 +134,12 @@ pub struct Pins {
     _blank: gpiob::PB0<Output<PushPull>>,
 }
 
-/// Set up clocks, pins, the DAC (beam parked and blanked) and the
-/// watchdog (`watchdog_ms`).
+/// Set up clocks, the millisecond clock ([`crate::clock`]), the host link
+/// (USART2, receiving from here on), pins, the DAC (beam parked and
+/// blanked) and the watchdog (`watchdog_ms`).
 pub fn init(watchdog_ms: u32) -> Board {
     let Some(dp) = pac::Peripherals::take() else { fault() };
+    let Some(cp) = cortex_m::Peripherals::take() else { fault() };
     // QEMU does not model the RCC: its reads return 0, so waiting for the
     // HSE or the PLL to be ready would never end; it runs the core at the
     // reset clock and needs no bus clocks.
@@ -127,8 +149,13 @@ pub fn init(watchdog_ms: u32) -> Board {
     let mut rcc = dp
         .RCC
         .freeze(stm32f4xx_hal::rcc::Config::hse(8.MHz()).sysclk(168.MHz()).pclk1(42.MHz()).pclk2(84.MHz()));
+    #[cfg(not(feature = "qemu"))]
     let sysclk_hz = rcc.clocks.sysclk().raw();
-    rcc.apb1enr().modify(|_, w| w.dacen().set_bit());
+    #[cfg(feature = "qemu")]
+    let sysclk_hz = QEMU_CORE_HZ;
+    let pclk1_hz = rcc.clocks.pclk1().raw();
+    crate::clock::start(cp.SYST, sysclk_hz);
+    rcc.apb1enr().modify(|_, w| w.dacen().set_bit().usart2en().set_bit());
     #[cfg(not(feature = "qemu"))]
     rcc.apb2enr().modify(|_, w| w.tim8en().set_bit());
     #[cfg(not(feature = "qemu"))]
@@ -136,6 +163,10 @@ pub fn init(watchdog_ms: u32) -> Board {
 
     let gpioa = dp.GPIOA.split(&mut rcc);
     let gpiob = dp.GPIOB.split(&mut rcc);
+    // The host link first: the sender's hello may already be on the line.
+    // RX pulled up, so an unconnected pin reads as an idle line.
+    let link_pins = (gpioa.pa2.into_alternate::<7>(), gpioa.pa3.into_alternate::<7>().internal_pull_up(true));
+    let (rx, tx) = serial::init(dp.USART2, pclk1_hz, BAUD);
     // The blank pin goes to its blanked level before it becomes an output.
     let blanked = if BLANK_ACTIVE_HIGH { PinState::High } else { PinState::Low };
     let pins = Pins {
@@ -152,7 +183,7 @@ pub fn init(watchdog_ms: u32) -> Board {
     let out = Out::new(dp.DAC, pins, rcc.clocks.timclk2().raw());
     #[cfg(not(feature = "qemu"))]
     let out = out.with_dma(dp.TIM8, dp.DMA1, dp.DMA2);
-    Board { out, watchdog, sysclk_hz }
+    Board { out, watchdog, sysclk_hz, pclk1_hz, rx, tx, _link_pins: link_pins }
 }
 
 /// The X/Y DAC and the blank pin.
@@ -252,13 +283,100 @@ pub fn exit(success: bool) -> ! {
     }
 }
 
+/// What [`Streaming::fill_from`] did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Filled {
+    /// A half is full and handed to the output.
+    Half,
+    /// The samples ran out inside a half, which stays open.
+    FrameEnd,
+}
+
+/// A DMA transfer error; the beam is parked and blanked.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DmaError;
+
+#[cfg(feature = "qemu")]
+pub use cpu::Streaming;
+
+#[cfg(feature = "qemu")]
+mod cpu {
+    //! The output under QEMU: the same API as the DMA path, without a
+    //! sample clock. Halves are handed out at once; while recording, the
+    //! CPU writes each sample to the DAC and the blank pin.
+
+    use super::{DmaError, Filled, HALF, Out};
+    use isoscope_core::dac::Sample;
+
+    /// The running output.
+    pub struct Streaming {
+        out: Out,
+        /// The next slot of the current half.
+        slot: usize,
+        recording: bool,
+    }
+
+    impl Out {
+        /// Start the output (not recording).
+        pub fn start(self) -> Streaming {
+            Streaming { out: self, slot: 0, recording: false }
+        }
+    }
+
+    impl Streaming {
+        /// As the DMA path's: fill the current half from `samples`.
+        pub fn fill_from(&mut self, samples: &mut impl Iterator<Item = Sample>) -> Result<Filled, DmaError> {
+            while self.slot < HALF {
+                let Some(s) = samples.next() else { return Ok(Filled::FrameEnd) };
+                if self.recording {
+                    self.out.write(s);
+                }
+                self.slot += 1;
+            }
+            self.slot = 0;
+            Ok(Filled::Half)
+        }
+
+        /// As the DMA path's: finish the current half with the park sample.
+        pub fn pad(&mut self) -> Result<(), DmaError> {
+            let park = self.out.park;
+            self.fill_from(&mut core::iter::repeat(park)).map(drop)
+        }
+
+        /// Write the samples played from now on to the DAC and the blank
+        /// pin (or stop).
+        pub fn record(&mut self, on: bool) {
+            self.recording = on;
+        }
+
+        /// Park and blank the beam now (a marker in the log).
+        pub fn park(&mut self) {
+            self.out.park();
+        }
+
+        /// Halves refilled late: none without a sample clock.
+        pub fn late(&self) -> u32 {
+            0
+        }
+
+        /// As the DMA path's: finish the current half with the park sample
+        /// before a long redraw.
+        pub fn hold(&mut self) -> Result<(), DmaError> {
+            if self.slot > 0 { self.pad() } else { Ok(()) }
+        }
+
+        /// As the DMA path's.
+        pub fn release(&mut self) {}
+    }
+}
+
 #[cfg(not(feature = "qemu"))]
 mod dma {
     //! The DMA output path (see the module docs of `board`).
 
     use super::{
-        DAC_CH2, DAC_DMAEN1, DAC_EN1, DAC_TEN1, DAC_TSEL1_TIM8, HALF, Out, SAMPLE_RATE_HZ, blank_word,
-        dac_word, pac,
+        DAC_CH2, DAC_DMAEN1, DAC_EN1, DAC_TEN1, DAC_TSEL1_TIM8, DmaError, Filled, HALF, Out, SAMPLE_RATE_HZ,
+        blank_word, dac_word, pac,
     };
     use core::cell::UnsafeCell;
     use core::sync::atomic::{AtomicU8, AtomicU32, Ordering, compiler_fence};
@@ -300,41 +418,81 @@ mod dma {
         /// The beam of the last sample written (the blank buffer runs one
         /// slot behind the X/Y buffer).
         last_beam: Beam,
+        /// The half being filled and the next slot in it, if any.
+        open: Option<(usize, usize)>,
+        /// The late count when the beam was held ([`Self::hold`]).
+        planned: u32,
+        /// Late refills while the beam was held.
+        forgiven: u32,
     }
 
     impl Out {
-        /// Prefill the whole double buffer from `samples`, then start the
-        /// sample clock.
-        pub fn start(mut self, samples: &mut impl Iterator<Item = Sample>) -> Streaming {
+        /// Fill the whole double buffer with the park sample (blanked),
+        /// then start the sample clock.
+        pub fn start(mut self) -> Streaming {
             // The first update event outputs the DAC's current holding
             // register: the park sample.
             self.park();
-            let mut st = Streaming { out: self, last_beam: Beam::Off };
-            st.fill(0, samples);
-            st.fill(1, samples);
+            let mut st = Streaming { out: self, last_beam: Beam::Off, open: None, planned: 0, forgiven: 0 };
+            for half in 0..2 {
+                let park = st.out.park;
+                st.write(half, 0, &mut core::iter::repeat(park));
+            }
             st.arm();
             st
         }
     }
 
     impl Streaming {
-        /// Write `HALF` samples into half `half` of both buffers: sample `j`'s
-        /// position at slot `j` of the X/Y buffer, the beam of sample `j - 1`
-        /// at slot `j` of the blank buffer.
-        fn fill(&mut self, half: usize, samples: &mut impl Iterator<Item = Sample>) {
-            let park = self.out.park;
+        /// Write samples into half `half` of both buffers from slot `from`
+        /// until the half is full or `samples` ends: sample `j`'s position
+        /// at slot `j` of the X/Y buffer, the beam of sample `j - 1` at slot
+        /// `j` of the blank buffer. Returns the next slot.
+        fn write(&mut self, half: usize, from: usize, samples: &mut impl Iterator<Item = Sample>) -> usize {
             let xy = XY.0.get().cast::<u32>();
             let blank = BLANK.0.get().cast::<u32>();
-            for slot in half * HALF..(half + 1) * HALF {
-                let s = samples.next().unwrap_or(park);
+            let mut slot = half * HALF + from;
+            while slot < (half + 1) * HALF {
+                let Some(s) = samples.next() else { break };
                 // SAFETY: `slot < 2 * HALF`; the DMA is not reading this half.
                 unsafe {
                     xy.add(slot).write_volatile(dac_word(s));
                     blank.add(slot).write_volatile(blank_word(self.last_beam));
                 }
                 self.last_beam = s.beam;
+                slot += 1;
             }
             compiler_fence(Ordering::SeqCst);
+            slot - half * HALF
+        }
+
+        /// Fill the open half from `samples`, waiting for the DMA to free a
+        /// half first if none is open. Returns [`Filled::Half`] when the
+        /// half is full and handed to the DMA, [`Filled::FrameEnd`] when
+        /// `samples` ran out first (the half stays open for the next
+        /// frame), or `Err` after a DMA error (the beam is then parked and
+        /// blanked).
+        pub fn fill_from(&mut self, samples: &mut impl Iterator<Item = Sample>) -> Result<Filled, DmaError> {
+            let (half, from) = match self.open {
+                Some(open) => open,
+                None => (self.wait()?, 0),
+            };
+            let to = self.write(half, from, samples);
+            if to < HALF {
+                self.open = Some((half, to));
+                return Ok(Filled::FrameEnd);
+            }
+            self.open = None;
+            FREE.fetch_and(!(1 << half), Ordering::SeqCst);
+            Ok(Filled::Half)
+        }
+
+        /// Fill the rest of the open half (or a whole free one) with the
+        /// park sample and hand it to the DMA: for a picture with no
+        /// samples.
+        pub fn pad(&mut self) -> Result<(), DmaError> {
+            let park = self.out.park;
+            self.fill_from(&mut core::iter::repeat(park)).map(drop)
         }
 
         /// Configure TIM8, the DAC trigger and both DMA streams, and start.
@@ -406,13 +564,12 @@ mod dma {
             tim8.cr1().write(|w| w.cen().set_bit());
         }
 
-        /// Wait for a free half and refill it from `samples`. Returns false
-        /// after a DMA error (the beam is then parked and blanked).
-        pub fn refill(&mut self, samples: &mut impl Iterator<Item = Sample>) -> bool {
-            let half = loop {
+        /// Wait for a free half; returns it.
+        fn wait(&mut self) -> Result<usize, DmaError> {
+            loop {
                 if ERROR.load(Ordering::SeqCst) != 0 {
                     super::emergency_park();
-                    return false;
+                    return Err(DmaError);
                 }
                 let free = cortex_m::interrupt::free(|_| {
                     let free = FREE.load(Ordering::SeqCst);
@@ -423,21 +580,53 @@ mod dma {
                     }
                     free
                 });
-                if free & 1 != 0 {
-                    break 0;
+                match free {
+                    0 => {}
+                    1 => return Ok(0),
+                    2 => return Ok(1),
+                    // Both: the main loop was late (or held the beam), and
+                    // the DMA is reading one of them again by now. Take the
+                    // other (NDTR counts down: above HALF, it is in the
+                    // first half) and forget the one being read (the
+                    // interrupt frees it again when it is done).
+                    _ => {
+                        let Some((_, dma1, _)) = self.out.dma.as_ref() else { super::fault() };
+                        let reading = if dma1.st(5).ndtr().read().bits() as usize > HALF { 0 } else { 1 };
+                        FREE.fetch_and(!(1 << reading), Ordering::SeqCst);
+                        return Ok(1 - reading);
+                    }
                 }
-                if free & 2 != 0 {
-                    break 1;
-                }
-            };
-            self.fill(half, samples);
-            FREE.fetch_and(!(1 << half), Ordering::SeqCst);
-            true
+            }
         }
 
-        /// Halves refilled too late so far.
+        /// Park and blank the beam for a while: fill the open half and the
+        /// next free one with the park sample, so that the DMA plays only
+        /// the park sample until the main loop refills again (before a
+        /// long redraw: better a blank screen than a stale half buffer
+        /// replayed). Takes up to three half buffers' time (1.5 ms): an
+        /// open half is finished, and refilled whole once the DMA has
+        /// played it.
+        pub fn hold(&mut self) -> Result<(), DmaError> {
+            if self.open.is_some() {
+                self.pad()?;
+            }
+            self.pad()?;
+            self.pad()?;
+            self.planned = LATE.load(Ordering::Relaxed);
+            Ok(())
+        }
+
+        /// Stop counting the refills that come late after [`Self::hold`]
+        /// as late.
+        pub fn release(&mut self) {
+            let late = LATE.load(Ordering::Relaxed);
+            self.forgiven = self.forgiven.wrapping_add(late.wrapping_sub(self.planned));
+        }
+
+        /// Halves refilled too late so far (not counting the beam held
+        /// parked on purpose, [`Self::hold`]).
         pub fn late(&self) -> u32 {
-            LATE.load(Ordering::Relaxed)
+            LATE.load(Ordering::Relaxed).wrapping_sub(self.forgiven)
         }
     }
 

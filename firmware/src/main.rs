@@ -1,108 +1,373 @@
 //! isoscope firmware: a contour surface on an XY oscilloscope, from an
-//! STM32F407G-DISC1 (see `board` for the pins and the output path).
+//! STM32F407G-DISC1 (see `board` for the pins and the output path), fed
+//! volumes over a UART by `isoscope-sim send`.
 //!
-//! For now it draws a built-in scene (the hydrogen 3d_xy orbital at 12^3,
-//! [`isoscope_scene`]) forever: the display list is built once at boot, then
-//! the beam scheduler refills the DMA double buffer frame after frame. The
-//! UART link comes with the device engine.
+//! The board is the core's device engine ([`isoscope_core::engine`]) behind
+//! USART2 ([`serial`]): it takes the host's frames, answers them, streams
+//! and contours each volume a slice at a time, and keeps the picture on
+//! screen until a new volume is complete. At boot it feeds itself the
+//! built-in hydrogen orbital ([`isoscope_scene::boot_frames`]), so the
+//! scope shows a picture before any host has spoken.
 //!
-//! Under the `qemu` feature it plays [`isoscope_scene::QEMU_FRAMES`] frames
-//! from the CPU and exits QEMU, for the end-to-end test
-//! (`scripts/firmware-qemu-test`).
+//! The main loop plays frames of the picture ([`Screen::frame`], from the
+//! park position back to it) through the DMA double buffer. Between two
+//! half-buffer refills it feeds the received bytes to the engine
+//! ([`Link::feed`], through [`Engine::split`]) and queues its answers for
+//! the UART; at each frame boundary it calls [`Engine::update`], where a
+//! new volume or view becomes the picture.
+//!
+//! Under the `qemu` feature the same loop runs on QEMU's netduinoplus2
+//! without a sample clock, for the end-to-end test
+//! (`scripts/firmware-qemu-test`): it records [`isoscope_scene::QEMU_FRAMES`]
+//! frames of the boot picture, then, after the first volume received over
+//! USART2 is drawn, as many frames of it, sends its answers and exits QEMU.
+//!
+//! [`Screen::frame`]: isoscope_core::engine::Screen::frame
 #![no_std]
 #![no_main]
 
 mod board;
+mod clock;
+mod mem;
+mod serial;
+mod stack;
 
-use core::sync::atomic::{AtomicBool, Ordering};
+use board::Filled;
 use cortex_m_rt::{ExceptionFrame, entry, exception};
-use isoscope_scene::Buffers;
+use isoscope_core::engine::{Engine, Event, Link};
 use panic_probe as _;
+use serial::{Rx, Tx};
 
 #[cfg(not(feature = "qemu"))]
 use defmt_rtt as _;
 #[cfg(feature = "qemu")]
 use defmt_semihosting as _;
 
-/// Watchdog timeout while the scene is built (the longest stretch without
-/// feeding it; LSI tolerance can shorten it to about 0.7 of this).
-const BUILD_WATCHDOG_MS: u32 = 3_000;
-/// Watchdog timeout while streaming (fed every half buffer, 512 us).
-#[cfg(not(feature = "qemu"))]
-const RUN_WATCHDOG_MS: u32 = 50;
-
-/// The scene's buffers (89 KB, zero-initialised in .bss: never on the
-/// stack), handed out once.
-fn buffers() -> &'static mut Buffers {
-    static TAKEN: AtomicBool = AtomicBool::new(false);
-    static mut BUFFERS: Buffers = Buffers::new();
-    if TAKEN.swap(true, Ordering::SeqCst) {
-        board::fault();
-    }
-    // SAFETY: reached once (TAKEN), so this is the only reference.
-    unsafe { &mut *core::ptr::addr_of_mut!(BUFFERS) }
-}
+/// Watchdog timeout (LSI tolerance can shorten it to about 0.7 of this).
+/// The main loop feeds it every half buffer (512 us), but the longest
+/// stretches without feeding are the boot picture, contouring a slice and
+/// stitching and ordering a new surface (see the README's budgets).
+const WATCHDOG_MS: u32 = 3_000;
+/// Received bytes fed to the engine between two half-buffer refills (at
+/// 921,600 baud about 47 arrive in the 512 us of a half).
+const FEED_CHUNK: usize = 256;
 
 #[entry]
 fn main() -> ! {
-    let mut board = board::init(BUILD_WATCHDOG_MS);
-    let beam = isoscope_scene::beam_config();
-    board.out.set_park(beam.park_sample());
-    board.out.park();
+    stack::paint();
+    let mut board = board::init(WATCHDOG_MS);
     defmt::info!(
-        "isoscope: {} Hz core, {} samples/s; building the scene",
+        "isoscope: {} Hz core, {} samples/s; host link USART2 at {} baud (really {}); engine {} B + buffers {} B SRAM + {} B {}",
         board.sysclk_hz,
-        board::SAMPLE_RATE_HZ
+        board::SAMPLE_RATE_HZ,
+        board::BAUD,
+        serial::actual_baud(board.pclk1_hz, board::BAUD),
+        mem::ENGINE_BYTES,
+        mem::SRAM_BYTES,
+        mem::CCM_BYTES,
+        if cfg!(feature = "qemu") { "SRAM" } else { "CCM" },
     );
-
-    let buf = buffers();
-    let built = match isoscope_scene::build(buf) {
-        Ok(b) => b,
-        Err(_) => {
-            defmt::error!("isoscope: the built-in scene failed to build");
+    let engine = match mem::engine() {
+        Some(Ok(e)) => e,
+        Some(Err(e)) => {
+            defmt::error!("isoscope: the engine refused its settings: {}", e);
             board::fault();
         }
+        None => board::fault(),
     };
+    board.out.set_park(engine.beam().park_sample());
+    board.out.park();
+    boot(engine);
     board.watchdog.feed();
-    defmt::info!(
-        "isoscope: {} fragments ({} points) -> {} polylines ({} points), {} dropped; frame {} samples ({} lit)",
-        built.fragments,
-        built.points_in,
-        built.optimize.polylines,
-        built.optimize.points_out,
-        built.dropped,
-        built.frame_samples,
-        built.lit_samples,
-    );
-    let list = &buf.list;
-    let mut samples = isoscope_scene::refresh(list, &beam);
+    run(board, engine)
+}
 
-    #[cfg(feature = "qemu")]
-    {
-        let n = usize::try_from(built.frame_samples).unwrap_or(0) * isoscope_scene::QEMU_FRAMES;
-        for s in samples.by_ref().take(n) {
-            board.out.write(s);
+/// Put the built-in volume on screen: feed the engine its frames as a host
+/// would, drop the answers (nobody asked), draw it.
+fn boot(engine: &mut Engine<'_>) {
+    let t0 = clock::cycles();
+    if isoscope_scene::boot_frames(|frame| engine.feed(frame, clock::now_ms())).is_err() {
+        defmt::error!("isoscope: the boot volume could not be encoded");
+    }
+    let t1 = clock::cycles();
+    engine.update(clock::now_ms());
+    let t2 = clock::cycles();
+    let mut sink = [0u8; 64];
+    while engine.transmit(&mut sink) > 0 {}
+    defmt::info!(
+        "isoscope: boot picture {}^3 {}: fed in {} cycles, drawn in {} cycles",
+        isoscope_scene::SIDE,
+        isoscope_scene::DEMO.name(),
+        t1.wrapping_sub(t0),
+        t2.wrapping_sub(t1)
+    );
+    log_events(engine);
+}
+
+/// Log the engine's events. Returns whether one of them makes the next
+/// `update` redraw the picture (a new volume, view or beam).
+fn log_events(engine: &mut Engine<'_>) -> bool {
+    let mut redraw = false;
+    while let Some(ev) = engine.next_event() {
+        defmt::info!("engine t={}ms: {}", clock::now_ms(), ev);
+        redraw |= matches!(ev, Event::Committed { .. } | Event::ViewSet | Event::BeamSet);
+    }
+    redraw
+}
+
+/// Move the engine's answers into the transmit ring (as many as fit; the
+/// rest wait in the engine's queue) and start sending.
+fn answer(link: &mut Link<'_, '_>, tx: &mut Tx) {
+    let mut buf = [0u8; 64];
+    while link.pending() > 0 {
+        let room = tx.room().min(buf.len());
+        if room == 0 {
+            break;
         }
-        board.out.park();
-        defmt::info!("isoscope: played {} samples, exiting", n);
-        board::exit(true);
+        let n = link.transmit(buf.get_mut(..room).unwrap_or_default());
+        tx.write(buf.get(..n).unwrap_or_default());
+    }
+    tx.pump();
+}
+
+/// Between two half-buffer refills: feed what arrived, send the answers.
+fn serve(link: &mut Link<'_, '_>, rx: &mut Rx, tx: &mut Tx, timing: &mut Timing) {
+    let mut buf = [0u8; FEED_CHUNK];
+    let n = rx.read(&mut buf);
+    if n > 0 {
+        let t0 = clock::cycles();
+        link.feed(buf.get(..n).unwrap_or_default(), clock::now_ms());
+        timing.feed = timing.feed.max(clock::cycles().wrapping_sub(t0));
+    }
+    answer(link, tx);
+}
+
+/// The longest stretches the main loop spent away from the output, in core
+/// cycles.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, defmt::Format)]
+struct Timing {
+    /// One `Link::feed` call (contouring a completed slice happens there).
+    feed: u32,
+    /// One `Engine::update` that redrew the picture.
+    update: u32,
+    /// Filling one half buffer (512 samples) from the beam scheduler (on
+    /// the board, with the wait for the DMA to free it).
+    fill: u32,
+    /// All half-buffer fills, and how many.
+    fill_total: u64,
+    halves: u32,
+}
+
+/// Log what changed: new longest stretches, late refills, link losses, a
+/// deeper stack (checked once a second).
+struct Report {
+    timing: Timing,
+    late: u32,
+    serial: serial::Stats,
+    core_mhz: u32,
+    stack: usize,
+    stack_checked_ms: u32,
+}
+
+impl Report {
+    fn new(core_hz: u32) -> Self {
+        Self {
+            timing: Timing::default(),
+            late: 0,
+            serial: serial::stats(),
+            core_mhz: (core_hz / 1_000_000).max(1),
+            stack: 0,
+            stack_checked_ms: 0,
+        }
     }
 
-    #[cfg(not(feature = "qemu"))]
-    {
-        use stm32f4xx_hal::prelude::*;
-        board.watchdog.start(RUN_WATCHDOG_MS.millis());
-        let mut out = board.out.start(&mut samples);
-        let mut late = 0;
+    fn log(&mut self, timing: Timing, late: u32) {
+        if (timing.feed, timing.update, timing.fill)
+            != (self.timing.feed, self.timing.update, self.timing.fill)
+        {
+            self.timing = timing;
+            defmt::info!(
+                "isoscope: longest feed {} us, redraw {} us, half-buffer fill {} us ({} / {} / {} cycles)",
+                timing.feed / self.core_mhz,
+                timing.update / self.core_mhz,
+                timing.fill / self.core_mhz,
+                timing.feed,
+                timing.update,
+                timing.fill
+            );
+        }
+        if late != self.late {
+            self.late = late;
+            defmt::warn!("isoscope: {} half buffers refilled late", late);
+        }
+        let s = serial::stats();
+        if (s.dropped, s.overruns) != (self.serial.dropped, self.serial.overruns) {
+            defmt::warn!("isoscope: host link {}", s);
+        }
+        self.serial = s;
+        let now = clock::now_ms();
+        if now.wrapping_sub(self.stack_checked_ms) >= 1_000 {
+            self.stack_checked_ms = now;
+            let peak = stack::peak();
+            if peak > self.stack {
+                self.stack = peak;
+                defmt::info!("isoscope: stack peak {} of {} bytes", peak, stack::size());
+            }
+        }
+    }
+}
+
+/// The main loop: frame after frame of the picture, the link served
+/// between half buffers, the engine updated between frames.
+fn run(board: board::Board, engine: &mut Engine<'static>) -> ! {
+    let board::Board { out, mut watchdog, mut rx, mut tx, sysclk_hz, .. } = board;
+    let mut out = out.start();
+    let mut timing = Timing::default();
+    let mut report = Report::new(sysclk_hz);
+    #[cfg(feature = "qemu")]
+    let mut script = qemu::Script::new(engine.counters().volumes);
+    defmt::info!("isoscope: showing the picture; listening on USART2");
+    loop {
+        // A frame boundary: what the link changed becomes the picture. A
+        // redraw takes long (see the README's budgets): the beam waits
+        // parked and blanked meanwhile.
+        let hold = log_events(engine);
+        if hold && out.hold().is_err() {
+            board::fault();
+        }
+        let t0 = clock::cycles();
+        let redrawn = engine.update(clock::now_ms());
+        if redrawn {
+            timing.update = timing.update.max(clock::cycles().wrapping_sub(t0));
+        }
+        if hold {
+            out.release();
+        }
+        answer(&mut engine.split().0, &mut tx);
+        log_events(engine);
+        report.log(timing, out.late());
+        #[cfg(feature = "qemu")]
+        script.boundary(redrawn, engine, &mut out, &mut tx, &report);
+
+        let (mut link, screen) = engine.split();
+        let mut frame = screen.frame();
         loop {
-            if !out.refill(&mut samples) {
-                defmt::error!("isoscope: DMA transfer error; beam parked, waiting for the watchdog");
+            let t0 = clock::cycles();
+            match out.fill_from(&mut frame) {
+                Ok(Filled::Half) => {
+                    let dt = clock::cycles().wrapping_sub(t0);
+                    timing.fill = timing.fill.max(dt);
+                    timing.fill_total += u64::from(dt);
+                    timing.halves = timing.halves.wrapping_add(1);
+                }
+                Ok(Filled::FrameEnd) => break,
+                Err(_) => {
+                    defmt::error!("isoscope: DMA transfer error; beam parked, waiting for the watchdog");
+                    board::fault();
+                }
+            }
+            serve(&mut link, &mut rx, &mut tx, &mut timing);
+            watchdog.feed();
+        }
+        if frame.stats().samples == 0 {
+            // Nothing to draw: the beam rests parked for a half buffer.
+            if out.pad().is_err() {
                 board::fault();
             }
-            board.watchdog.feed();
-            if out.late() != late {
-                late = out.late();
-                defmt::warn!("isoscope: {} half buffers refilled late", late);
+            serve(&mut link, &mut rx, &mut tx, &mut timing);
+            watchdog.feed();
+        }
+    }
+}
+
+#[cfg(feature = "qemu")]
+mod qemu {
+    //! The end-to-end test's script, run at every frame boundary: record
+    //! the boot picture's first frames, then the first received volume's.
+
+    use super::{Report, answer, log_events};
+    use crate::board::{self, Streaming};
+    use crate::serial::Tx;
+    use crate::{clock, serial, stack};
+    use isoscope_core::engine::Engine;
+    use isoscope_scene::QEMU_FRAMES;
+
+    enum Step {
+        /// Recording the boot picture; frames left.
+        Boot(usize),
+        /// Waiting for a volume from the host.
+        Wait,
+        /// Recording the received picture; frames left.
+        Received(usize),
+    }
+
+    /// Where the test stands.
+    pub struct Script {
+        step: Step,
+        started: bool,
+        boot_volumes: u32,
+    }
+
+    impl Script {
+        pub fn new(boot_volumes: u32) -> Self {
+            Self { step: Step::Boot(QEMU_FRAMES), started: false, boot_volumes }
+        }
+
+        /// A frame boundary; `redrawn`: the picture changed here.
+        pub fn boundary(
+            &mut self,
+            redrawn: bool,
+            engine: &mut Engine<'_>,
+            out: &mut Streaming,
+            tx: &mut Tx,
+            report: &Report,
+        ) {
+            match self.step {
+                Step::Boot(left) if !self.started => {
+                    self.started = true;
+                    out.record(true);
+                    self.step = Step::Boot(left);
+                }
+                Step::Boot(left) => {
+                    if left > 1 {
+                        self.step = Step::Boot(left - 1);
+                    } else {
+                        out.record(false);
+                        out.park();
+                        defmt::info!(
+                            "qemu: recorded {} boot frames; waiting for a volume on USART2",
+                            QEMU_FRAMES
+                        );
+                        self.step = Step::Wait;
+                    }
+                }
+                Step::Wait => {
+                    if redrawn && engine.counters().volumes > self.boot_volumes {
+                        out.record(true);
+                        self.step = Step::Received(QEMU_FRAMES);
+                    }
+                }
+                Step::Received(left) if left > 1 => self.step = Step::Received(left - 1),
+                Step::Received(_) => {
+                    out.record(false);
+                    out.park();
+                    // The answers (the status sent once the picture was
+                    // drawn) go out before QEMU ends.
+                    while engine.split().0.pending() > 0 || tx.pending() > 0 {
+                        answer(&mut engine.split().0, tx);
+                    }
+                    log_events(engine);
+                    defmt::info!(
+                        "qemu: recorded {} frames of the received volume at t={} ms; {}; {}; engine {}",
+                        QEMU_FRAMES,
+                        clock::now_ms(),
+                        report.timing,
+                        serial::stats(),
+                        engine.counters()
+                    );
+                    defmt::info!("qemu: stack peak {} of {} bytes", stack::peak(), stack::size());
+                    board::exit(true);
+                }
             }
         }
     }

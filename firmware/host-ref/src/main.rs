@@ -1,20 +1,32 @@
 //! The host side of the firmware's QEMU end-to-end test.
 //!
-//! It builds the firmware's scene with the very same code
-//! ([`isoscope_scene`], compiled here for the host) and
+//! It runs the core's device engine with the firmware's settings and
+//! capacities ([`isoscope_scene`], compiled here for the host), feeds it the
+//! firmware's boot volume ([`isoscope_scene::boot_frames`]), and
 //!
-//! - `isoscope-fw-ref stats` prints what building it did (`key=value`);
+//! - `isoscope-fw-ref stats` prints what drawing the boot picture did
+//!   (`key=value`);
 //! - `isoscope-fw-ref samples` prints the samples the firmware plays under
-//!   QEMU ([`isoscope_scene::qemu_sequence`]), one `x y beam` line each
-//!   (beam 1 = lit);
-//! - `isoscope-fw-ref check LOG [--blank-port NAME] [--blank-pin N]
-//!   [--blank-active-low]` reads QEMU's `-d unimp` log of a run of the
-//!   firmware built with `--features qemu`, decodes the DAC's dual data
-//!   register (DHR12RD, offset 0x20 of the DAC) and the blank pin's BSRR
-//!   (offset 0x18 of its GPIO port) writes into samples, and requires them
-//!   to equal the host's, sample for sample. Exit status 0 when they do, 1
-//!   when not (the first differences are printed), 2 on bad usage or an
-//!   unreadable log.
+//!   QEMU before a host speaks, one `x y beam` line each (beam 1 = lit):
+//!   the park sample, [`QEMU_FRAMES`] frames of the boot picture
+//!   (`Engine::frame`), the park sample;
+//! - `isoscope-fw-ref check LOG [--received FRAME] [--blank-port NAME]
+//!   [--blank-pin N] [--blank-active-low]` reads QEMU's `-d unimp` log of a
+//!   run of the firmware built with `--features qemu`, decodes the DAC's
+//!   dual data register (DHR12RD, offset 0x20 of the DAC) and the blank
+//!   pin's BSRR (offset 0x18 of its GPIO port) writes into samples, and
+//!   requires them to equal, sample for sample, the samples above followed
+//!   (with `--received`) by [`QEMU_FRAMES`] repetitions of the frame in
+//!   FRAME (`x y beam` lines, as `isoscope-sim device --samples` writes
+//!   them for the volume sent) and the park sample. Exit status 0 when they
+//!   do, 1 when not (the first differences are printed), 2 on bad usage or
+//!   an unreadable log;
+//! - `isoscope-fw-ref inject HOST:PORT` talks to the board (QEMU's USART2)
+//!   over TCP and leaves it a damaged, abandoned transfer: hello, a
+//!   32x32x32 `f32` volume begun and three full slices sent (each
+//!   acknowledged: contoured), then the fourth slice's first frame cut in
+//!   half, random bytes, and a frame with a corrupt CRC. The next sender's
+//!   hello abandons that transfer; the picture must not change.
 //!
 //! The decoding is written from the register definitions (RM0090), not
 //! taken from the firmware: DHR12RD holds channel 1 (X) in bits 0..12 and
@@ -24,9 +36,18 @@
 //! leave the beam blanked.
 
 use isoscope_core::dac::{Beam, Sample};
-use isoscope_scene::{Buffers, beam_config, build, qemu_sequence};
+use isoscope_core::demo::Demo;
+use isoscope_core::engine::{Engine, Event, StaticBuffers};
+use isoscope_core::wire::{
+    AXIS_X, AXIS_Y, AXIS_Z, FrameDecoder, Levels, MAX_CHUNK, MAX_FRAME_LEN, Message, PROTOCOL_VERSION,
+    SampleType, encode,
+};
+use isoscope_scene::{EXTENT, KINDS, POINTS, QEMU_FRAMES, SLICE_BYTES, boot_frames, engine_config};
 use std::fmt::Write as _;
+use std::io::{Read, Write as _};
+use std::net::TcpStream;
 use std::process::ExitCode;
+use std::time::{Duration, Instant};
 
 /// Offset of DHR12RD in the DAC block.
 const DHR12RD: u64 = 0x20;
@@ -141,22 +162,84 @@ fn decode(log: &str, blank: &BlankPin) -> Result<Vec<Sample>, String> {
     Ok(samples)
 }
 
-fn reference() -> Result<(Box<Buffers>, isoscope_scene::Built), String> {
-    let mut buf = Box::new(Buffers::new());
-    let built = build(&mut buf).map_err(|e| format!("building the scene: {e:?}"))?;
-    Ok((buf, built))
+/// The firmware's engine memory, on the heap.
+type Memory = StaticBuffers<SLICE_BYTES, EXTENT, POINTS, KINDS>;
+
+/// What drawing the boot picture did.
+struct Boot {
+    frame: Vec<Sample>,
+    park: Sample,
+    commands: usize,
+    points: usize,
+    polylines: usize,
+    dropped: u64,
+}
+
+/// Feed the boot volume to an engine like the firmware's, draw it, and
+/// take one frame.
+fn boot_reference() -> Result<Boot, String> {
+    let mut mem = Box::new(Memory::new());
+    let mut engine = Engine::new(engine_config(), mem.buffers()).map_err(|e| format!("engine: {e}"))?;
+    boot_frames(|f| engine.feed(f, 0)).map_err(|e| format!("boot volume: {e}"))?;
+    engine.update(0);
+    let (mut points, mut polylines) = (0, 0);
+    while let Some(ev) = engine.next_event() {
+        if let Event::Redrawn { polylines: l, points: p, .. } = ev {
+            (points, polylines) = (p as usize, l as usize);
+        }
+    }
+    Ok(Boot {
+        frame: engine.frame().collect(),
+        park: engine.beam().park_sample(),
+        commands: engine.surface().map_or(0, |g| g.len()),
+        points,
+        polylines,
+        dropped: engine.surface().map_or(0, |g| u64::from(g.dropped())),
+    })
+}
+
+/// What the firmware plays under QEMU before a host speaks.
+fn boot_sequence(boot: &Boot) -> Vec<Sample> {
+    let mut v = vec![boot.park];
+    for _ in 0..QEMU_FRAMES {
+        v.extend_from_slice(&boot.frame);
+    }
+    v.push(boot.park);
+    v
 }
 
 fn beam_digit(b: Beam) -> u8 {
     u8::from(b == Beam::On)
 }
 
+/// Read `x y beam` lines.
+fn read_frame(path: &str) -> Result<Vec<Sample>, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("reading {path}: {e}"))?;
+    text.lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty())
+        .map(|(i, l)| {
+            let f: Vec<&str> = l.split_whitespace().collect();
+            let bad = || format!("{path}:{}: expected `x y beam`, got `{l}`", i + 1);
+            let [x, y, b] = f.as_slice() else { return Err(bad()) };
+            let beam = match *b {
+                "1" => Beam::On,
+                "0" => Beam::Off,
+                _ => return Err(bad()),
+            };
+            Ok(Sample::new(x.parse().map_err(|_| bad())?, y.parse().map_err(|_| bad())?, beam))
+        })
+        .collect()
+}
+
 fn check(args: &[String]) -> Result<bool, String> {
     let mut log_path = None;
+    let mut received = None;
     let mut blank = BlankPin { port: "GPIOB".into(), pin: 0, active_high: true };
     let mut it = args.iter();
     while let Some(a) = it.next() {
         match a.as_str() {
+            "--received" => received = Some(it.next().ok_or("--received needs a file")?.clone()),
             "--blank-port" => blank.port = it.next().ok_or("--blank-port needs a value")?.clone(),
             "--blank-pin" => {
                 blank.pin = it
@@ -173,21 +256,39 @@ fn check(args: &[String]) -> Result<bool, String> {
     let log_path = log_path.ok_or("check needs the path of QEMU's unimp log")?;
     let log = std::fs::read_to_string(&log_path).map_err(|e| format!("reading {log_path}: {e}"))?;
     let got = decode(&log, &blank)?;
-    let (buf, built) = reference()?;
-    let want: Vec<Sample> = qemu_sequence(&buf.list, &beam_config(), &built).collect();
+    let boot = boot_reference()?;
+    let mut want = boot_sequence(&boot);
+    let boot_len = want.len();
+    let mut received_frame = 0;
+    if let Some(path) = &received {
+        let frame = read_frame(path)?;
+        if frame.is_empty() {
+            return Err(format!("{path} holds no samples"));
+        }
+        received_frame = frame.len();
+        for _ in 0..QEMU_FRAMES {
+            want.extend_from_slice(&frame);
+        }
+        want.push(boot.park);
+    }
     let mismatches: Vec<usize> =
         (0..got.len().max(want.len())).filter(|&i| got.get(i) != want.get(i)).collect();
     let lit = got.iter().filter(|s| s.beam == Beam::On).count();
     println!(
-        "firmware samples={} host samples={} lit={} frame_samples={} frames={}",
+        "firmware samples={} expected={} lit={} boot_frame={} received_frame={} frames={}",
         got.len(),
         want.len(),
         lit,
-        built.frame_samples,
-        isoscope_scene::QEMU_FRAMES
+        boot.frame.len(),
+        received_frame,
+        QEMU_FRAMES
     );
     if mismatches.is_empty() && !want.is_empty() {
-        println!("ok: the firmware's DAC and blank writes equal the host's samples, sample for sample");
+        println!(
+            "ok: the firmware's DAC and blank writes equal the host's samples, sample for sample ({} boot{})",
+            boot_len,
+            if received.is_some() { " + received volume" } else { "" }
+        );
         return Ok(true);
     }
     let show = |s: Option<&Sample>| {
@@ -195,39 +296,195 @@ fn check(args: &[String]) -> Result<bool, String> {
     };
     let mut report = format!("MISMATCH: {} samples differ", mismatches.len());
     for &i in mismatches.iter().take(10) {
-        let _ = write!(report, "\n  sample {i}: firmware {} host {}", show(got.get(i)), show(want.get(i)));
+        let part = if i < boot_len { "boot" } else { "received" };
+        let _ = write!(
+            report,
+            "\n  sample {i} ({part}): firmware {} expected {}",
+            show(got.get(i)),
+            show(want.get(i))
+        );
     }
     println!("{report}");
     Ok(false)
 }
 
+/// A fixed-seed generator for the garbage (xorshift32).
+struct Noise(u32);
+
+impl Noise {
+    fn byte(&mut self) -> u8 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 17;
+        self.0 ^= self.0 << 5;
+        (self.0 >> 24) as u8
+    }
+}
+
+fn frame(msg: &Message<'_>) -> Result<Vec<u8>, String> {
+    let mut buf = vec![0u8; MAX_FRAME_LEN];
+    Ok(encode(msg, &mut buf).map_err(|e| format!("encoding {msg:?}: {e}"))?.to_vec())
+}
+
+/// Read the board's answers for up to `wait`, until `done` says so.
+fn listen(
+    s: &mut TcpStream,
+    dec: &mut FrameDecoder<512>,
+    wait: Duration,
+    mut seen: impl FnMut(Result<Message<'_>, isoscope_core::wire::WireError>) -> bool,
+) -> Result<bool, String> {
+    let deadline = Instant::now() + wait;
+    let mut buf = [0u8; 1024];
+    while Instant::now() < deadline {
+        let n = match s.read(&mut buf) {
+            Ok(0) => return Err("the board closed the connection".into()),
+            Ok(n) => n,
+            Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {
+                continue;
+            }
+            Err(e) => return Err(format!("reading: {e}")),
+        };
+        for &b in &buf[..n] {
+            if let Some(r) = dec.push(b) {
+                if seen(r) {
+                    return Ok(true);
+                }
+            }
+        }
+    }
+    Ok(false)
+}
+
+fn inject(args: &[String]) -> Result<bool, String> {
+    let addr = args.first().ok_or("inject needs HOST:PORT")?;
+    let mut s = TcpStream::connect(addr).map_err(|e| format!("connecting to {addr}: {e}"))?;
+    s.set_read_timeout(Some(Duration::from_millis(50))).map_err(|e| e.to_string())?;
+    let mut dec = FrameDecoder::<512>::new();
+    // Hello until the board answers (it drops what comes before its USART
+    // is enabled).
+    let mut hello = vec![0u8];
+    hello.extend(frame(&Message::Hello { protocol: PROTOCOL_VERSION, firmware: [0, 0, 0] })?);
+    let mut capacity = None;
+    for _ in 0..10 {
+        s.write_all(&hello).map_err(|e| e.to_string())?;
+        let got = listen(&mut s, &mut dec, Duration::from_millis(1500), |r| {
+            if let Ok(Message::Capabilities { max_slice_samples, .. }) = r {
+                capacity = Some(max_slice_samples);
+                return true;
+            }
+            false
+        })?;
+        if got {
+            break;
+        }
+    }
+    let capacity = capacity.ok_or("no answer to hello")?;
+    // A volume whose slices fill the board's slice buffer.
+    let n = 32usize;
+    let slice_bytes = n * n * 4;
+    if slice_bytes > capacity as usize {
+        return Err(format!(
+            "the board takes {capacity}-byte slices; the injected volume needs {slice_bytes}"
+        ));
+    }
+    let seq0 = 100u16;
+    let levels = Levels::from_slice(&[Demo::Hydrogen.default_level()]).unwrap_or_default();
+    let mut frames = vec![frame(&Message::BeginVolume {
+        seq: seq0,
+        dims: [n as u16; 3],
+        sample_type: SampleType::F32,
+        spacing: [1.0; 3],
+        levels,
+        axes: AXIS_X | AXIS_Y | AXIS_Z,
+        every: 1,
+    })?];
+    let full_slices = 3;
+    let mut next_slice_frames = Vec::new();
+    for k in 0..=full_slices {
+        let bytes: Vec<u8> =
+            (0..n * n).flat_map(|idx| Demo::Hydrogen.sample(n, idx % n, idx / n, k).to_le_bytes()).collect();
+        for (c, data) in bytes.chunks(MAX_CHUNK).enumerate() {
+            let seq = seq0 + frames.len() as u16 + next_slice_frames.len() as u16;
+            let f =
+                frame(&Message::SliceData { seq, slice: k as u16, offset: (c * MAX_CHUNK) as u32, data })?;
+            if k < full_slices { frames.push(f) } else { next_slice_frames.push(f) }
+        }
+    }
+    let last = seq0 + frames.len() as u16 - 1;
+    for f in &frames {
+        s.write_all(f).map_err(|e| e.to_string())?;
+    }
+    let mut acked = 0;
+    let mut nacks = Vec::new();
+    let all = listen(&mut s, &mut dec, Duration::from_secs(20), |r| match r {
+        Ok(Message::Ack { seq }) => {
+            acked += 1;
+            seq == last
+        }
+        Ok(Message::Nack { seq, code }) => {
+            nacks.push(format!("{seq}:{code:?}"));
+            false
+        }
+        _ => false,
+    })?;
+    if !all {
+        return Err(format!("only {acked} of {} commands acknowledged (nacks: {nacks:?})", frames.len()));
+    }
+    // The damage: half a frame, noise, a frame with a bad CRC.
+    let cut = &next_slice_frames[0];
+    let mut damage = cut[..cut.len() / 2].to_vec();
+    let mut noise = Noise(0x1234_5678);
+    damage.extend((0..3000).map(|_| noise.byte()));
+    let mut bad = next_slice_frames[1].clone();
+    let mid = bad.len() / 2;
+    bad[mid] = bad[mid].wrapping_add(1).max(1);
+    damage.extend(&bad);
+    s.write_all(&damage).map_err(|e| e.to_string())?;
+    let mut errors = 0;
+    listen(&mut s, &mut dec, Duration::from_millis(500), |r| {
+        if let Ok(Message::Nack { seq, code }) = r {
+            nacks.push(format!("{seq}:{code:?}"));
+            errors += 1;
+        }
+        false
+    })?;
+    println!(
+        "inject: {acked} commands acknowledged ({} full {n}x{n} f32 slices), then {} damaged bytes; {errors} nacks: {}",
+        full_slices,
+        damage.len(),
+        nacks.join(" ")
+    );
+    if errors == 0 {
+        return Err("the board did not complain about the damage".into());
+    }
+    Ok(true)
+}
+
 fn run(args: &[String]) -> Result<bool, String> {
     match args.first().map(String::as_str) {
         Some("stats") => {
-            let (buf, b) = reference()?;
+            let b = boot_reference()?;
             println!("demo={} side={}", isoscope_scene::DEMO.name(), isoscope_scene::SIDE);
-            println!("capacity={}", isoscope_scene::CAPACITY);
-            println!("fragments={}", b.fragments);
-            println!("points_in={}", b.points_in);
+            println!("slice_bytes={SLICE_BYTES} extent={EXTENT} points={POINTS}");
+            println!("surface_points={}", b.commands);
+            println!("polylines={}", b.polylines);
+            println!("points={}", b.points);
             println!("dropped={}", b.dropped);
-            println!("polylines={}", b.optimize.polylines);
-            println!("points={}", buf.list.len());
-            println!("frame_samples={}", b.frame_samples);
-            println!("lit_samples={}", b.lit_samples);
-            println!("cycle_blank_length={:.1}", b.order.cycle_after);
+            println!("frame_samples={}", b.frame.len());
+            println!("lit_samples={}", b.frame.iter().filter(|s| s.beam == Beam::On).count());
             Ok(true)
         }
         Some("samples") => {
-            let (buf, built) = reference()?;
+            let b = boot_reference()?;
             let mut out = String::new();
-            for s in qemu_sequence(&buf.list, &beam_config(), &built) {
+            for s in boot_sequence(&b) {
                 let _ = writeln!(out, "{} {} {}", s.x, s.y, beam_digit(s.beam));
             }
             print!("{out}");
             Ok(true)
         }
         Some("check") => check(&args[1..]),
-        _ => Err("usage: isoscope-fw-ref stats | samples | check LOG [--blank-port GPIOB] [--blank-pin 0] [--blank-active-low]".into()),
+        Some("inject") => inject(&args[1..]),
+        _ => Err("usage: isoscope-fw-ref stats | samples | check LOG [--received FRAME] [--blank-port GPIOB] [--blank-pin 0] [--blank-active-low] | inject HOST:PORT".into()),
     }
 }
 
@@ -248,11 +505,12 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_scene_fits_its_display_list() {
-        let (buf, b) = reference().unwrap();
+    fn the_boot_picture_fits() {
+        let b = boot_reference().unwrap();
         assert_eq!(b.dropped, 0);
-        assert!(b.points_in <= isoscope_scene::CAPACITY, "{} points", b.points_in);
-        assert!(!buf.list.is_empty() && b.frame_samples > 1000);
+        assert!(b.commands > 500 && b.commands <= POINTS, "{} points", b.commands);
+        assert!(b.frame.len() > 1000);
+        assert_eq!(b.frame.first().map(|s| s.beam), Some(Beam::Off));
     }
 
     #[test]

@@ -1,0 +1,89 @@
+//! The engine's memory: every buffer of [`Buffers`], in statics split
+//! between SRAM and the core-coupled memory, lent once to the one
+//! [`Engine`]. A change of `Buffers`' shape stays in this module.
+//!
+//! Sizes ([`isoscope_scene`]: `S` = [`SLICE_BYTES`], `E` = [`EXTENT`],
+//! `P` = [`POINTS`]):
+//!
+//! | buffer | bytes | where |
+//! |---|---|---|
+//! | two surfaces: points (6 B) and kinds (2 bits) | `12.5 P` = 64,000 | CCM |
+//! | slices, twice (the stitching and ordering scratch between volumes) | `2 S` = 32 KB | SRAM |
+//! | rows, twice (`f32`) | `8 E` = 1 KB | SRAM |
+//!
+//! The CCM (64 KB at 0x1000_0000) is reachable by the CPU only, which is
+//! all the engine needs; the DMA buffers of the output path stay in SRAM.
+//! cortex-m-rt neither loads nor zeroes the CCM (section `.ccmram`, NOLOAD,
+//! placed by `ccmram.x`), so its buffers are zeroed here, at run time,
+//! before they are lent.
+//!
+//! QEMU's netduinoplus2 (7.2) has no CCM (a write there is a bus fault), so
+//! under the `qemu` feature everything is in SRAM (same sizes).
+
+use core::mem::MaybeUninit;
+use core::sync::atomic::{AtomicBool, Ordering};
+use isoscope_core::engine::{Buffers, Engine, EngineError, Packed};
+use isoscope_scene::{EXTENT, KINDS, POINTS, SLICE_BYTES, engine_config};
+
+/// The CPU-only part, in the core-coupled memory (in SRAM under QEMU).
+struct Ccm {
+    points: [[Packed; POINTS]; 2],
+    kinds: [[u8; KINDS]; 2],
+}
+
+/// The rest, in SRAM (.bss, zeroed by cortex-m-rt).
+struct Sram {
+    slices: [u8; 2 * SLICE_BYTES],
+    rows: [[f32; EXTENT]; 2],
+}
+
+/// Bytes of engine memory in the CCM (in SRAM under QEMU).
+pub const CCM_BYTES: usize = core::mem::size_of::<Ccm>();
+/// Bytes of engine memory in SRAM.
+pub const SRAM_BYTES: usize = core::mem::size_of::<Sram>();
+#[cfg(not(feature = "qemu"))]
+const _: () = assert!(CCM_BYTES <= 64 * 1024, "the CCM holds 64 KB");
+
+#[cfg_attr(not(feature = "qemu"), unsafe(link_section = ".ccmram"))]
+static mut CCM: MaybeUninit<Ccm> = MaybeUninit::uninit();
+
+static mut SRAM: Sram = Sram { slices: [0; 2 * SLICE_BYTES], rows: [[0.0; EXTENT]; 2] };
+
+/// The engine itself (its frame decoder, answer and event queues), in
+/// SRAM rather than on the stack.
+static mut ENGINE: MaybeUninit<Engine<'static>> = MaybeUninit::uninit();
+
+/// Bytes of the engine itself.
+pub const ENGINE_BYTES: usize = core::mem::size_of::<Engine<'static>>();
+
+/// The engine over all of its memory, with the firmware's settings
+/// ([`engine_config`]). Returns `None` if called twice.
+pub fn engine() -> Option<Result<&'static mut Engine<'static>, EngineError>> {
+    static TAKEN: AtomicBool = AtomicBool::new(false);
+    if TAKEN.swap(true, Ordering::SeqCst) {
+        return None;
+    }
+    // SAFETY: reached once (TAKEN), so these are the only references to
+    // the two statics. Every field of `Ccm` is plain data (integers) for
+    // which all-zero bytes are a valid value, so zeroing the uninitialised
+    // CCM makes it an initialised `Ccm`.
+    let (ccm, sram) = unsafe {
+        let ccm = &mut *core::ptr::addr_of_mut!(CCM);
+        ccm.as_mut_ptr().write_bytes(0, 1);
+        (ccm.assume_init_mut(), &mut *core::ptr::addr_of_mut!(SRAM))
+    };
+    let [p0, p1] = &mut ccm.points;
+    let [k0, k1] = &mut ccm.kinds;
+    let [r0, r1] = &mut sram.rows;
+    let buffers = Buffers {
+        slices: &mut sram.slices,
+        rows: [r0, r1],
+        front: (p0, k0),
+        back: (p1, k1),
+        scratch: &mut [],
+    };
+    Some(Engine::new(engine_config(), buffers).map(|engine| {
+        // SAFETY: reached once (TAKEN): the only reference to ENGINE.
+        unsafe { (*core::ptr::addr_of_mut!(ENGINE)).write(engine) }
+    }))
+}
