@@ -678,11 +678,14 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
         ScreenPoint::new(self.pos.x, self.pos.y)
     }
 
+    #[inline]
     fn code(&self, p: Pos) -> (u16, u16) {
         let max = f32::from(self.cfg.max_code());
-        // In range by construction; clamped again against float rounding.
-        // `as` saturates, so an accident could not wrap either.
-        let c = |v: f32| libm::roundf(v).clamp(0.0, max) as u16;
+        // Round half away from zero, as `roundf`, for the non-negative
+        // clamped value: `v + 0.5` is exact below 2^22 (codes are at most
+        // 65535), and `as` truncates (and saturates: NaN gives 0). A few
+        // instructions instead of a call: this runs for every sample.
+        let c = |v: f32| (v.clamp(0.0, max) + 0.5) as u16;
         (c(p.x), c(p.y))
     }
 
