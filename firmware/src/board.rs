@@ -57,7 +57,7 @@
 //! (its second `-serial`) and SysTick (at 168 MHz, as the board).
 
 use crate::serial::{self, Rx, Tx};
-use isoscope_core::dac::{Beam, Sample};
+use isoscope_core::dac::{Beam, Dac, Sample};
 use stm32f4xx_hal::gpio::{Alternate, Analog, Output, PinState, PushPull, gpioa, gpiob};
 use stm32f4xx_hal::pac;
 use stm32f4xx_hal::prelude::*;
@@ -296,8 +296,48 @@ pub enum Filled {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct DmaError;
 
+impl core::fmt::Display for DmaError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str("DMA transfer error: the beam is parked and blanked")
+    }
+}
+
+/// The on-chip DAC as a [`Dac`], unclocked: each sample goes from the CPU
+/// straight to the dual register and the blank pin, as fast as the caller
+/// writes them (bring-up, a still park position, tests). The picture plays
+/// through [`Streaming`], the clocked one.
+impl Dac for Out {
+    type Error = core::convert::Infallible;
+
+    fn write<I: IntoIterator<Item = Sample>>(&mut self, samples: I) -> Result<(), Self::Error> {
+        for s in samples {
+            Out::write(self, s);
+        }
+        Ok(())
+    }
+}
+
+/// The sample-clocked output (TIM8 paces the DAC and the blank pin) as a
+/// [`Dac`]: the samples fill the double buffer as halves come free,
+/// blocking while both are queued; a partial last half stays open for the
+/// next write.
+impl Dac for Streaming {
+    type Error = DmaError;
+
+    fn write<I: IntoIterator<Item = Sample>>(&mut self, samples: I) -> Result<(), DmaError> {
+        let mut samples = samples.into_iter();
+        loop {
+            if self.fill_from(&mut samples)? == Filled::FrameEnd {
+                return Ok(());
+            }
+        }
+    }
+}
+
 #[cfg(feature = "qemu")]
 pub use cpu::Streaming;
+#[cfg(not(feature = "qemu"))]
+pub use dma::Streaming;
 
 #[cfg(feature = "qemu")]
 mod cpu {
