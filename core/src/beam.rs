@@ -586,6 +586,8 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Clean<I> {
 struct Plan {
     from: Pos,
     to: Pos,
+    /// `(to - from) / steps`: the move of one lit sample.
+    delta: Pos,
     /// `to` rounded to DAC codes.
     code: (u16, u16),
     blank: u16,
@@ -711,7 +713,16 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
     fn jump(&mut self, to: Pos, lit: u16) -> Plan {
         let d = self.pos.distance(to);
         self.stats.blank_length += d;
-        Plan { from: to, to, code: self.code(to), blank: self.cfg.settle_samples(d), step: 0, steps: 0, lit }
+        Plan {
+            from: to,
+            to,
+            delta: Pos { x: 0.0, y: 0.0 },
+            code: self.code(to),
+            blank: self.cfg.settle_samples(d),
+            step: 0,
+            steps: 0,
+            lit,
+        }
     }
 
     /// The plan of the next command, or `None` at the end of the frame.
@@ -741,13 +752,17 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
                         }
                         _ => self.cfg.dwell_end,
                     };
+                    let steps = self.cfg.segment_samples(length);
+                    // One division a segment, not two a sample.
+                    let inv = 1.0 / steps.max(1) as f32;
                     Plan {
                         from,
                         to: p,
+                        delta: Pos { x: (p.x - from.x) * inv, y: (p.y - from.y) * inv },
                         code: self.code(p),
                         blank: 0,
                         step: 0,
-                        steps: self.cfg.segment_samples(length),
+                        steps,
                         lit,
                     }
                 }
@@ -795,10 +810,9 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Iterator for Scheduler<I> {
                 let code = if plan.step == plan.steps {
                     plan.code
                 } else {
-                    // Multiply first: exact for whole-LSB segments.
-                    let (k, n) = (plan.step as f32, plan.steps as f32);
-                    let (a, b) = (plan.from, plan.to);
-                    let at = Pos { x: a.x + (b.x - a.x) * k / n, y: a.y + (b.y - a.y) * k / n };
+                    let k = plan.step as f32;
+                    let (a, d) = (plan.from, plan.delta);
+                    let at = Pos { x: a.x + d.x * k, y: a.y + d.y * k };
                     self.code(at)
                 };
                 return Some(self.emit(code, Beam::On));
