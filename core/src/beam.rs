@@ -416,12 +416,18 @@ impl BeamConfig {
     ///
     /// Meaningful for a valid configuration; never panics.
     pub fn segment_samples(&self, length: f32) -> u32 {
+        self.segment_samples_within(length, self.segment_cap())
+    }
+
+    /// [`BeamConfig::segment_samples`] with the cap given (the scheduler
+    /// computes it once, not once a segment).
+    fn segment_samples_within(&self, length: f32, cap: u32) -> u32 {
         if length.is_nan() || length <= 0.0 {
             return 0;
         }
         let steps = ceil(length / self.lit_step);
         let steps = if steps.is_nan() { 1 } else { (steps as u32).max(1) };
-        steps.min(self.segment_cap())
+        steps.min(cap)
     }
 
     /// The most samples one lit segment may take:
@@ -658,6 +664,10 @@ pub struct Scheduler<I> {
     /// `cos(corner_angle_deg)`: a vertex is a corner when the cosine of its
     /// turn is below this.
     corner_cos: f32,
+    /// The largest DAC code, as `f32`.
+    max: f32,
+    /// [`BeamConfig::segment_cap`].
+    cap: u32,
     pos: Pos,
     lit: bool,
     plan: Plan,
@@ -699,8 +709,10 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
         Self {
             src,
             ahead,
+            cap: cfg.segment_cap(),
             cfg,
             corner_cos,
+            max,
             pos: start,
             lit: false,
             plan: Plan { from: start, to: start, ..Plan::default() },
@@ -729,7 +741,7 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
 
     #[inline]
     fn code(&self, p: Pos) -> (u16, u16) {
-        let max = f32::from(self.cfg.max_code());
+        let max = self.max;
         // Round half away from zero, as `roundf`, for the non-negative
         // clamped value: `v + 0.5` is exact below 2^22 (codes are at most
         // 65535), and `as` truncates (and saturates: NaN gives 0). A few
@@ -809,7 +821,7 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
                         }
                         _ => self.cfg.dwell_end,
                     };
-                    let steps = self.cfg.segment_samples(length);
+                    let steps = self.cfg.segment_samples_within(length, self.cap);
                     // One division a segment, not two a sample.
                     let inv = 1.0 / steps.max(1) as f32;
                     Plan {

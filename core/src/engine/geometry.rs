@@ -160,6 +160,16 @@ impl<'a> Geometry<'a> {
         Some((p, Kind::from_bits(byte >> (2 * (i % 4)))))
     }
 
+    /// The kind of point `i` alone.
+    #[inline]
+    fn kind(&self, i: usize) -> Option<Kind> {
+        if i >= self.len {
+            return None;
+        }
+        let byte = *self.kinds.get(i / 4)?;
+        Some(Kind::from_bits(byte >> (2 * (i % 4))))
+    }
+
     fn set_kind(&mut self, i: usize, kind: Kind) {
         if let Some(byte) = self.kinds.get_mut(i / 4) {
             let s = 2 * (i % 4);
@@ -255,7 +265,7 @@ impl Iterator for Commands<'_, '_> {
         let (q, kind) = self.g.get(self.i)?;
         self.i += 1;
         // The loop ends here if the next point starts something (or none).
-        let ends = self.g.get(self.i).is_none_or(|(_, k)| k.starts());
+        let ends = self.g.kind(self.i).is_none_or(Kind::starts);
         let p = self.g.point(q);
         let command = match kind {
             Kind::Line => Command::LineTo(p),
