@@ -441,7 +441,9 @@ impl Iterator for Projected<'_> {
 
     #[inline]
     fn next(&mut self) -> Option<Command<ScreenPoint>> {
-        let t = self.transform?;
+        // By reference: the transform is some twenty words, and this runs
+        // for every point of every frame.
+        let t = self.transform.as_ref()?;
         self.commands.next().map(|c| c.map(|p| t.project(p)))
     }
 }
