@@ -14,14 +14,18 @@ use isoscope_core::wire::{
     PROTOCOL_VERSION, SampleType, encode,
 };
 use proptest::prelude::*;
+
+#[path = "common/segments.rs"]
+mod segments;
+use segments::{Seg, segments};
 use std::convert::Infallible;
 
 /// Engine memory on the heap, for tests.
 struct Mem {
     slices: Vec<u8>,
-    rows: [Vec<f32>; 2],
-    points: [Vec<Packed>; 2],
-    kinds: [Vec<u8>; 2],
+    rows: Vec<f32>,
+    points: Vec<Packed>,
+    kinds: Vec<u8>,
     scratch: Vec<u8>,
 }
 
@@ -29,24 +33,21 @@ impl Mem {
     fn new(slice: usize, extent: usize, points: usize) -> Self {
         Self {
             slices: vec![0; 2 * slice],
-            rows: [vec![0.0; extent], vec![0.0; extent]],
-            points: [vec![[0; 3]; points], vec![[0; 3]; points]],
-            kinds: [vec![0; points.div_ceil(4)], vec![0; points.div_ceil(4)]],
+            rows: vec![0.0; 2 * extent],
+            points: vec![[0; 3]; 2 * points],
+            kinds: vec![0; 2 * points.div_ceil(4)],
             scratch: vec![0; 8 * points],
         }
     }
 
     fn buffers(&mut self) -> Buffers<'_> {
-        let [r0, r1] = &mut self.rows;
-        let [p0, p1] = &mut self.points;
-        let [k0, k1] = &mut self.kinds;
-        Buffers {
-            slices: &mut self.slices,
-            rows: [r0, r1],
-            front: (p0, k0),
-            back: (p1, k1),
-            scratch: &mut self.scratch,
-        }
+        Buffers::halves(
+            &mut self.slices,
+            &mut self.rows,
+            &mut self.points,
+            &mut self.kinds,
+            &mut self.scratch,
+        )
     }
 }
 
@@ -224,44 +225,6 @@ fn picture(e: &Engine<'_>) -> Vec<(u32, u32, bool)> {
     e.commands()
         .map(|c| (c.point().x.to_bits(), c.point().y.to_bits(), matches!(c, Command::MoveTo(_))))
         .collect()
-}
-
-/// A drawn segment, undirected (a dot is a segment from a point to itself),
-/// in the engine's fixed point.
-type Seg = (Packed, Packed);
-
-/// The segments commands draw, sorted, zero-length lines left out (the
-/// quantisation can join two crossings a hair apart; the engine then draws
-/// one point, not a line).
-fn segments(cmds: impl Iterator<Item = Command<Point3>>, shift: u8) -> Vec<Seg> {
-    let q = |p: &Point3| Geometry::quantise_with(shift, *p);
-    let mut out = Vec::new();
-    let mut at = None;
-    for c in cmds {
-        let p = q(c.point());
-        match c {
-            Command::MoveTo(_) => at = Some(p),
-            Command::Point(_) => {
-                out.push((p, p));
-                at = None;
-            }
-            Command::LineTo(_) => {
-                if let Some(a) = at {
-                    if a != p {
-                        out.push(if a < p { (a, p) } else { (p, a) });
-                    }
-                }
-                at = Some(p);
-            }
-        }
-    }
-    // What is drawn, once: duplicates and dots on lines are culled.
-    out.sort();
-    out.dedup();
-    let on_line: std::collections::HashSet<Packed> =
-        out.iter().filter(|(a, b)| a != b).flat_map(|&(a, b)| [a, b]).collect();
-    out.retain(|(a, b)| a != b || !on_line.contains(a));
-    out
 }
 
 /// The engine's picture as segments.

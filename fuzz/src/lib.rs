@@ -157,36 +157,28 @@ pub fn reference_precheck(frame: &[u8]) -> Result<(), WireError> {
 /// points in each surface.
 pub struct EngineMem {
     slices: Vec<u8>,
-    rows: [Vec<f32>; 2],
-    points: [Vec<isoscope_core::engine::Packed>; 2],
-    kinds: [Vec<u8>; 2],
+    rows: Vec<f32>,
+    points: Vec<isoscope_core::engine::Packed>,
+    kinds: Vec<u8>,
 }
 
 impl EngineMem {
     /// Zeroed memory.
     pub fn new() -> Self {
         const P: usize = 4096;
-        Self {
-            slices: vec![0; 2048],
-            rows: [vec![0.0; 32], vec![0.0; 32]],
-            points: [vec![[0; 3]; P], vec![[0; 3]; P]],
-            kinds: [vec![0; P / 4], vec![0; P / 4]],
-        }
+        Self { slices: vec![0; 2048], rows: vec![0.0; 64], points: vec![[0; 3]; 2 * P], kinds: vec![0; 2 * P / 4] }
     }
 
     /// The memory, lent to an engine (no extra scratch: the slices are it,
     /// as on the MCU).
     pub fn buffers(&mut self) -> isoscope_core::engine::Buffers<'_> {
-        let [r0, r1] = &mut self.rows;
-        let [p0, p1] = &mut self.points;
-        let [k0, k1] = &mut self.kinds;
-        isoscope_core::engine::Buffers {
-            slices: &mut self.slices,
-            rows: [r0, r1],
-            front: (p0, k0),
-            back: (p1, k1),
-            scratch: &mut [],
-        }
+        isoscope_core::engine::Buffers::halves(
+            &mut self.slices,
+            &mut self.rows,
+            &mut self.points,
+            &mut self.kinds,
+            &mut [],
+        )
     }
 }
 

@@ -15,9 +15,9 @@ use std::time::{Duration, Instant};
 #[derive(Debug, Clone)]
 pub struct HostBuffers {
     slices: Vec<u8>,
-    rows: [Vec<f32>; 2],
-    points: [Vec<Packed>; 2],
-    kinds: [Vec<u8>; 2],
+    rows: Vec<f32>,
+    points: Vec<Packed>,
+    kinds: Vec<u8>,
     scratch: Vec<u8>,
 }
 
@@ -28,25 +28,22 @@ impl HostBuffers {
     pub fn new(slice_bytes: usize, extent: usize, points: usize) -> Self {
         Self {
             slices: vec![0; 2 * slice_bytes],
-            rows: [vec![0.0; extent], vec![0.0; extent]],
-            points: [vec![[0; 3]; points], vec![[0; 3]; points]],
-            kinds: [vec![0; points.div_ceil(4)], vec![0; points.div_ceil(4)]],
+            rows: vec![0.0; 2 * extent],
+            points: vec![[0; 3]; 2 * points],
+            kinds: vec![0; 2 * points.div_ceil(4)],
             scratch: vec![0; 8 * points],
         }
     }
 
     /// The buffers, lent to an engine.
     pub fn buffers(&mut self) -> Buffers<'_> {
-        let [r0, r1] = &mut self.rows;
-        let [p0, p1] = &mut self.points;
-        let [k0, k1] = &mut self.kinds;
-        Buffers {
-            slices: &mut self.slices,
-            rows: [r0, r1],
-            front: (p0, k0),
-            back: (p1, k1),
-            scratch: &mut self.scratch,
-        }
+        Buffers::halves(
+            &mut self.slices,
+            &mut self.rows,
+            &mut self.points,
+            &mut self.kinds,
+            &mut self.scratch,
+        )
     }
 }
 

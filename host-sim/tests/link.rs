@@ -5,7 +5,7 @@
 use isoscope_core::command::{Command, Point3};
 use isoscope_core::demo::Demo;
 use isoscope_core::display::OptimizeConfig;
-use isoscope_core::engine::{Engine, EngineConfig, Geometry, Packed};
+use isoscope_core::engine::{Engine, EngineConfig, Geometry};
 use isoscope_core::grid::{Planes, Volume};
 use isoscope_core::surface::{SliceId, SurfaceSink, contour_volume};
 use isoscope_core::trace::Traversal;
@@ -13,6 +13,10 @@ use isoscope_sim::device::HostBuffers;
 use isoscope_sim::link::{SendConfig, WireVolume, send_volume};
 use isoscope_sim::volume::{DemoSpec, LoadedVolume};
 use std::convert::Infallible;
+
+#[path = "../../core/tests/common/segments.rs"]
+mod segments;
+use segments::segments;
 use std::io::{BufRead, BufReader, ErrorKind, Read, Write};
 use std::process::{Command as Process, Stdio};
 use std::sync::mpsc::{Receiver, Sender, channel};
@@ -21,38 +25,6 @@ use std::time::Duration;
 
 fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_isoscope-sim")
-}
-
-/// An undirected segment in the engine's fixed point (a dot: both ends equal).
-type Seg = (Packed, Packed);
-
-/// The segments commands draw, sorted, zero-length lines left out.
-fn segments(cmds: impl Iterator<Item = Command<Point3>>, shift: u8) -> Vec<Seg> {
-    let mut out = Vec::new();
-    let mut at = None;
-    for c in cmds {
-        let p = Geometry::quantise_with(shift, *c.point());
-        match c {
-            Command::MoveTo(_) => at = Some(p),
-            Command::Point(_) => {
-                out.push((p, p));
-                at = None;
-            }
-            Command::LineTo(_) => {
-                if let Some(a) = at.filter(|&a| a != p) {
-                    out.push(if a < p { (a, p) } else { (p, a) });
-                }
-                at = Some(p);
-            }
-        }
-    }
-    // What is drawn, once: duplicates and dots on lines are culled.
-    out.sort();
-    out.dedup();
-    let on_line: std::collections::HashSet<Packed> =
-        out.iter().filter(|(a, b)| a != b).flat_map(|&(a, b)| [a, b]).collect();
-    out.retain(|(a, b)| a != b || !on_line.contains(a));
-    out
 }
 
 struct Keep(Vec<Command<Point3>>);

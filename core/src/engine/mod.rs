@@ -89,6 +89,24 @@ pub struct Buffers<'a> {
     pub scratch: &'a mut [u8],
 }
 
+impl<'a> Buffers<'a> {
+    /// Buffers from one block of each kind, cut in two halves: `rows` into
+    /// the two rows, `points` and `kinds` into the two surfaces (front
+    /// first). `slices` holds both slices as it is.
+    pub fn halves(
+        slices: &'a mut [u8],
+        rows: &'a mut [f32],
+        points: &'a mut [Packed],
+        kinds: &'a mut [u8],
+        scratch: &'a mut [u8],
+    ) -> Self {
+        let (r0, r1) = rows.split_at_mut(rows.len() / 2);
+        let (p0, p1) = points.split_at_mut(points.len() / 2);
+        let (k0, k1) = kinds.split_at_mut(kinds.len() / 2);
+        Self { slices, rows: [r0, r1], front: (p0, k0), back: (p1, k1), scratch }
+    }
+}
+
 /// The engine's memory in arrays, for a `static` on the MCU.
 ///
 /// - `SLICE`: bytes in one slice (`nx * ny * sample size`), twice.
@@ -121,16 +139,13 @@ impl<const SLICE: usize, const EXTENT: usize, const POINTS: usize, const KINDS: 
 
     /// The buffers, lent to an [`Engine`].
     pub fn buffers(&mut self) -> Buffers<'_> {
-        let [r0, r1] = &mut self.rows;
-        let [p0, p1] = &mut self.points;
-        let [k0, k1] = &mut self.kinds;
-        Buffers {
-            slices: self.slices.as_flattened_mut(),
-            rows: [r0, r1],
-            front: (p0, k0),
-            back: (p1, k1),
-            scratch: &mut [],
-        }
+        Buffers::halves(
+            self.slices.as_flattened_mut(),
+            self.rows.as_flattened_mut(),
+            self.points.as_flattened_mut(),
+            self.kinds.as_flattened_mut(),
+            &mut [],
+        )
     }
 }
 
