@@ -476,7 +476,7 @@ pub(crate) fn chain(
                 tour.push(&mut x.w, f, end);
                 cur = exit(&x, f, end);
             }
-            tour.two_opt(&mut x, start);
+            tour.two_opt(&mut x);
             tour.best_entries(&mut x, start);
             for k in 0..tour.len {
                 let (f, end) = tour.get(&x.w, k);
@@ -582,7 +582,7 @@ impl Tour {
     /// 2-opt: reverse a run of up to [`WINDOW`] steps (each drawn the other
     /// way) where that shortens the two jumps at its ends; first
     /// improvement, until a pass finds none (at most 8 passes).
-    fn two_opt(&self, x: &mut Index<'_, '_, '_>, start: Packed) {
+    fn two_opt(&self, x: &mut Index<'_, '_, '_>) {
         let n = self.len;
         if n < 3 {
             return;
@@ -596,8 +596,8 @@ impl Tour {
             passes += 1;
             improved = false;
             for i in 0..n - 1 {
-                // The jump into step i + 1 comes from step i's exit (or the
-                // start, for i = 0 meaning "before step 0" is not moved).
+                // The jump into step i + 1 comes from step i's exit; step 0
+                // is never moved, so the jump from the start stays.
                 let out_i = self.ends(x, i).1;
                 let in_i1 = self.ends(x, i + 1).0;
                 let before = d(out_i, in_i1);
@@ -618,7 +618,6 @@ impl Tour {
                 }
             }
         }
-        let _ = start;
     }
 
     /// Reverse steps `a..=b`, each drawn the other way.
