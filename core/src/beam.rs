@@ -132,7 +132,7 @@
 //! ```
 
 use crate::command::Command;
-use crate::dac::{Beam, Sample};
+use crate::dac::{Beam, Sample, SampleSource};
 use crate::screen::ScreenPoint;
 
 /// The smallest accepted [`BeamConfig::lit_step`], in LSB per sample.
@@ -863,6 +863,104 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
     }
 }
 
+impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
+    /// The code of lit step `k` (`1 ..= steps`) of the current plan: the
+    /// plan's target for the last, `from + delta * k` rounded for the
+    /// others.
+    #[inline(always)]
+    fn step_code(&self, k: u32) -> (u16, u16) {
+        let plan = &self.plan;
+        if k == plan.steps {
+            plan.code
+        } else {
+            let k = k as f32;
+            let (a, d) = (plan.from, plan.delta);
+            self.code(Pos { x: a.x + d.x * k, y: a.y + d.y * k })
+        }
+    }
+
+    /// The next samples of the frame, handed to `put` one by one, at most
+    /// `max` of them; returns how many. Fewer than `max` only when the frame
+    /// has ended. The same samples, statistics and state as taking them
+    /// from the iterator one [`next`](Iterator::next) at a time, which one
+    /// may mix with this; but a run of repeated samples (a jump's settle, a
+    /// dwell) or a segment's steps costs one loop here, not a state machine
+    /// round per sample. The firmware refills its DMA halves this way.
+    pub fn fill_with<F: FnMut(Sample)>(&mut self, max: usize, mut put: F) -> usize {
+        let mut done = 0usize;
+        while done < max {
+            let room = max - done;
+            let plan = &mut self.plan;
+            if plan.blank > 0 {
+                let n = usize::from(plan.blank).min(room);
+                plan.blank -= n as u16; // n <= blank
+                let (x, y) = plan.code;
+                let s = Sample::new(x, y, Beam::Off);
+                for _ in 0..n {
+                    put(s);
+                }
+                self.ran(n, Beam::Off);
+                done += n;
+                continue;
+            }
+            if plan.step < plan.steps {
+                let left = plan.steps - plan.step;
+                let n = if (left as usize) < room { left } else { room as u32 };
+                let first = plan.step + 1;
+                plan.step += n;
+                for k in first..first + n {
+                    let (x, y) = self.step_code(k);
+                    put(Sample::new(x, y, Beam::On));
+                }
+                self.ran(n as usize, Beam::On);
+                done += n as usize;
+                continue;
+            }
+            if plan.lit > 0 {
+                let n = usize::from(plan.lit).min(room);
+                plan.lit -= n as u16; // n <= lit
+                let (x, y) = plan.code;
+                let s = Sample::new(x, y, Beam::On);
+                for _ in 0..n {
+                    put(s);
+                }
+                self.ran(n, Beam::On);
+                done += n;
+                continue;
+            }
+            match self.next_plan() {
+                Some(plan) => self.plan = plan,
+                None => break,
+            }
+        }
+        done
+    }
+
+    /// [`Self::fill_with`] into a slice: fills `out` from the start and
+    /// returns how many samples it wrote, fewer than `out.len()` only at the
+    /// end of the frame.
+    pub fn fill(&mut self, out: &mut [Sample]) -> usize {
+        let mut slots = out.iter_mut();
+        self.fill_with(slots.len(), |s| {
+            if let Some(slot) = slots.next() {
+                *slot = s;
+            }
+        })
+    }
+
+    /// Account for `n` samples just emitted with `beam`.
+    #[inline(always)]
+    fn ran(&mut self, n: usize, beam: Beam) {
+        if n > 0 {
+            self.lit = beam == Beam::On;
+            self.stats.samples += n as u64;
+            if self.lit {
+                self.stats.lit_samples += n as u64;
+            }
+        }
+    }
+}
+
 impl<I: Iterator<Item = Command<ScreenPoint>>> Iterator for Scheduler<I> {
     type Item = Sample;
 
@@ -876,14 +974,8 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Iterator for Scheduler<I> {
             }
             if plan.step < plan.steps {
                 plan.step += 1;
-                let code = if plan.step == plan.steps {
-                    plan.code
-                } else {
-                    let k = plan.step as f32;
-                    let (a, d) = (plan.from, plan.delta);
-                    let at = Pos { x: a.x + d.x * k, y: a.y + d.y * k };
-                    self.code(at)
-                };
+                let k = plan.step;
+                let code = self.step_code(k);
                 return Some(self.emit(code, Beam::On));
             }
             if plan.lit > 0 {
@@ -903,6 +995,13 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Iterator for Scheduler<I> {
 }
 
 impl<I: Iterator<Item = Command<ScreenPoint>>> core::iter::FusedIterator for Scheduler<I> {}
+
+impl<I: Iterator<Item = Command<ScreenPoint>>> SampleSource for Scheduler<I> {
+    #[inline]
+    fn fill_with<F: FnMut(Sample)>(&mut self, max: usize, put: F) -> usize {
+        Scheduler::fill_with(self, max, put)
+    }
+}
 
 #[cfg(test)]
 mod tests {

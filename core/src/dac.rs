@@ -36,6 +36,41 @@ impl Sample {
     }
 }
 
+/// Samples handed out in runs: what a DMA refill loop pulls from.
+///
+/// The beam scheduler ([`crate::beam::Scheduler`]) implements it with a
+/// loop per run (a settle, a dwell, a segment's steps) rather than a state
+/// machine round per sample; any iterator does through [`Samples`].
+pub trait SampleSource {
+    /// Hand the next samples to `put`, at most `max` of them; returns how
+    /// many. Fewer than `max` only when the source has run out.
+    fn fill_with<F: FnMut(Sample)>(&mut self, max: usize, put: F) -> usize;
+}
+
+/// Any iterator of samples as a [`SampleSource`], one `next` at a time.
+#[derive(Debug, Clone)]
+pub struct Samples<I>(pub I);
+
+impl<I: Iterator<Item = Sample>> SampleSource for Samples<I> {
+    #[inline]
+    fn fill_with<F: FnMut(Sample)>(&mut self, max: usize, mut put: F) -> usize {
+        let mut n = 0;
+        while n < max {
+            let Some(s) = self.0.next() else { break };
+            put(s);
+            n += 1;
+        }
+        n
+    }
+}
+
+impl<S: SampleSource + ?Sized> SampleSource for &mut S {
+    #[inline]
+    fn fill_with<F: FnMut(Sample)>(&mut self, max: usize, put: F) -> usize {
+        (**self).fill_with(max, put)
+    }
+}
+
 /// A device that plays samples: X and Y to the scope's inputs, the beam to
 /// its Z input (or a blanking circuit).
 pub trait Dac {

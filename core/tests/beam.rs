@@ -23,7 +23,7 @@
 use isoscope_core::beam::{BeamConfig, FrameStats, MIN_LIT_STEP, Park, Scheduler, frame_stats, park_samples};
 use isoscope_core::command::{Command, CommandSink, Point2};
 use isoscope_core::contour::contour_grid;
-use isoscope_core::dac::{Beam, Dac, Sample};
+use isoscope_core::dac::{Beam, Dac, Sample, SampleSource, Samples};
 use isoscope_core::grid::Grid2;
 use isoscope_core::mock_dac::{MockDac, MockDacError};
 use isoscope_core::screen::ScreenPoint;
@@ -548,6 +548,51 @@ proptest! {
         // The mock DAC at the same resolution takes all of them.
         let mut dac = MockDac::<16, 8>::new(cfg.sanitized().bits);
         prop_assert_eq!(dac.write(samples.iter().copied()), Ok(()));
+    }
+
+    /// Filling in runs (as the firmware refills its DMA halves, in chunks
+    /// of any size, mixed with single `next`s) gives the iterator's
+    /// samples, statistics and end, and so does `Samples` over any
+    /// iterator.
+    #[test]
+    fn fill_equals_the_iterator(
+        cfg in garbage_config(),
+        cmds in commands(any_coord(5000.0), 24),
+        chunks in prop::collection::vec(0usize..70, 1..12),
+    ) {
+        let bound = sample_bound(cmds.len(), &cfg);
+        prop_assume!(bound <= 2_000_000);
+        let want: Vec<Sample> = Scheduler::new(cmds.iter().copied(), &cfg).collect();
+        let mut sch = Scheduler::new(cmds.iter().copied(), &cfg);
+        let mut got = Vec::new();
+        let mut buf = [Sample::default(); 70];
+        for (i, &n) in chunks.iter().cycle().enumerate() {
+            let ended = match i % 3 {
+                0 => {
+                    let k = sch.fill(&mut buf[..n]);
+                    got.extend_from_slice(&buf[..k]);
+                    k < n
+                }
+                1 => {
+                    let k = sch.fill_with(n, |s| got.push(s));
+                    prop_assert!(k <= n);
+                    k < n
+                }
+                _ => sch.next().map(|s| got.push(s)).is_none(),
+            };
+            if ended {
+                break;
+            }
+            prop_assert!(got.len() <= want.len(), "{} samples, more than the iterator's {}", got.len(), want.len());
+        }
+        prop_assert_eq!(&got, &want);
+        prop_assert_eq!(sch.fill_with(5, |_| ()), 0, "it stays ended");
+        prop_assert_eq!(sch.next(), None);
+        prop_assert_eq!(sch.stats(), frame_stats(cmds.iter().copied(), &cfg));
+        let mut it = Samples(want.iter().copied());
+        let mut again = Vec::new();
+        while it.fill_with(7, |s| again.push(s)) == 7 {}
+        prop_assert_eq!(again, want);
     }
 
     /// a. Valid configurations, wild coordinates: the same, plus only

@@ -57,7 +57,7 @@
 //! (its second `-serial`) and SysTick (at 168 MHz, as the board).
 
 use crate::serial::{self, Rx, Tx};
-use isoscope_core::dac::{Beam, Dac, Sample};
+use isoscope_core::dac::{Beam, Dac, Sample, Samples};
 use stm32f4xx_hal::gpio::{Alternate, Analog, Output, PinState, PushPull, gpioa, gpiob};
 use stm32f4xx_hal::pac;
 use stm32f4xx_hal::prelude::*;
@@ -325,7 +325,7 @@ impl Dac for Streaming {
     type Error = DmaError;
 
     fn write<I: IntoIterator<Item = Sample>>(&mut self, samples: I) -> Result<(), DmaError> {
-        let mut samples = samples.into_iter();
+        let mut samples = Samples(samples.into_iter());
         loop {
             if self.fill_from(&mut samples)? == Filled::FrameEnd {
                 return Ok(());
@@ -346,7 +346,7 @@ mod cpu {
     //! CPU writes each sample to the DAC and the blank pin.
 
     use super::{DmaError, Filled, HALF, Out};
-    use isoscope_core::dac::Sample;
+    use isoscope_core::dac::{SampleSource, Samples};
 
     /// The running output.
     pub struct Streaming {
@@ -365,13 +365,17 @@ mod cpu {
 
     impl Streaming {
         /// As the DMA path's: fill the current half from `samples`.
-        pub fn fill_from(&mut self, samples: &mut impl Iterator<Item = Sample>) -> Result<Filled, DmaError> {
-            while self.slot < HALF {
-                let Some(s) = samples.next() else { return Ok(Filled::FrameEnd) };
-                if self.recording {
-                    self.out.write(s);
+        pub fn fill_from(&mut self, samples: &mut impl SampleSource) -> Result<Filled, DmaError> {
+            let (out, recording) = (&mut self.out, self.recording);
+            let room = HALF - self.slot;
+            let n = samples.fill_with(room, |s| {
+                if recording {
+                    out.write(s);
                 }
-                self.slot += 1;
+            });
+            if n < room {
+                self.slot += n;
+                return Ok(Filled::FrameEnd);
             }
             self.slot = 0;
             Ok(Filled::Half)
@@ -380,7 +384,7 @@ mod cpu {
         /// As the DMA path's: finish the current half with the park sample.
         pub fn pad(&mut self) -> Result<(), DmaError> {
             let park = self.out.park;
-            self.fill_from(&mut core::iter::repeat(park)).map(drop)
+            self.fill_from(&mut Samples(core::iter::repeat(park))).map(drop)
         }
 
         /// Write the samples played from now on to the DAC and the blank
@@ -420,7 +424,7 @@ mod dma {
     };
     use core::cell::UnsafeCell;
     use core::sync::atomic::{AtomicU8, AtomicU32, Ordering, compiler_fence};
-    use isoscope_core::dac::{Beam, Sample};
+    use isoscope_core::dac::{Beam, SampleSource, Samples};
     use stm32f4xx_hal::interrupt;
 
     /// A DMA buffer: the CPU writes one half while the DMA reads the other.
@@ -476,7 +480,7 @@ mod dma {
             let mut st = Streaming { out: self, last_beam: Beam::Off, open: None, planned: 0, forgiven: 0 };
             for half in 0..2 {
                 let park = st.out.park;
-                st.write(half, 0, &mut core::iter::repeat(park));
+                st.write(half, 0, &mut Samples(core::iter::repeat(park)));
             }
             st.arm();
             st
@@ -488,20 +492,26 @@ mod dma {
         /// until the half is full or `samples` ends: sample `j`'s position
         /// at slot `j` of the X/Y buffer, the beam of sample `j - 1` at slot
         /// `j` of the blank buffer. Returns the next slot.
-        fn write(&mut self, half: usize, from: usize, samples: &mut impl Iterator<Item = Sample>) -> usize {
+        fn write(&mut self, half: usize, from: usize, samples: &mut impl SampleSource) -> usize {
             let xy = XY.0.get().cast::<u32>();
             let blank = BLANK.0.get().cast::<u32>();
-            let mut slot = half * HALF + from;
-            while slot < (half + 1) * HALF {
-                let Some(s) = samples.next() else { break };
-                // SAFETY: `slot < 2 * HALF`; the DMA is not reading this half.
-                unsafe {
-                    xy.add(slot).write_volatile(dac_word(s));
-                    blank.add(slot).write_volatile(blank_word(self.last_beam));
+            let start = half * HALF + from;
+            let end = (half + 1) * HALF;
+            let mut slot = start;
+            let mut last = self.last_beam;
+            samples.fill_with(end.saturating_sub(start), |s| {
+                if slot < end {
+                    // SAFETY: `slot < end <= 2 * HALF`; the DMA is not
+                    // reading this half.
+                    unsafe {
+                        xy.add(slot).write_volatile(dac_word(s));
+                        blank.add(slot).write_volatile(blank_word(last));
+                    }
+                    last = s.beam;
+                    slot += 1;
                 }
-                self.last_beam = s.beam;
-                slot += 1;
-            }
+            });
+            self.last_beam = last;
             compiler_fence(Ordering::SeqCst);
             slot - half * HALF
         }
@@ -512,7 +522,7 @@ mod dma {
         /// `samples` ran out first (the half stays open for the next
         /// frame), or `Err` after a DMA error (the beam is then parked and
         /// blanked).
-        pub fn fill_from(&mut self, samples: &mut impl Iterator<Item = Sample>) -> Result<Filled, DmaError> {
+        pub fn fill_from(&mut self, samples: &mut impl SampleSource) -> Result<Filled, DmaError> {
             let (half, from) = match self.open {
                 Some(open) => open,
                 None => (self.wait()?, 0),
@@ -532,7 +542,7 @@ mod dma {
         /// samples.
         pub fn pad(&mut self) -> Result<(), DmaError> {
             let park = self.out.park;
-            self.fill_from(&mut core::iter::repeat(park)).map(drop)
+            self.fill_from(&mut Samples(core::iter::repeat(park))).map(drop)
         }
 
         /// Configure TIM8, the DAC trigger and both DMA streams, and start.

@@ -1,0 +1,111 @@
+//! Playing the picture: the device engine's refill path, the one the
+//! firmware runs between DMA halves. `cargo bench -p isoscope-core --bench frame`
+//!
+//! The engine holds a received hydrogen 16^3 volume (the firmware's boot
+//! demo at the firmware's default settings); `frame/iter` plays one frame
+//! through the scheduler's `Iterator`, `frame/fill` through
+//! `Scheduler::fill` into 512-sample halves, as the firmware does. Both
+//! report samples per second. `frame/project` is the geometry and the view
+//! alone (no beam).
+//!
+//! Under callgrind (`valgrind --tool=callgrind target/release/deps/frame-*
+//! --bench --profile-time 2 frame/fill`) this shows where a sample's
+//! instructions go.
+
+use criterion::{Criterion, Throughput, black_box, criterion_group, criterion_main};
+use isoscope_core::dac::Sample;
+use isoscope_core::demo::Demo;
+use isoscope_core::engine::{Buffers, Engine, EngineConfig, Packed};
+use isoscope_core::wire::{AXIS_X, AXIS_Y, AXIS_Z, Levels, Message, SampleType, encode};
+
+const SIDE: usize = 16;
+const POINTS: usize = 5120;
+/// Samples per DMA half in the firmware.
+const HALF: usize = 512;
+
+struct Mem {
+    slices: Vec<u8>,
+    rows: Vec<f32>,
+    points: Vec<Packed>,
+    kinds: Vec<u8>,
+}
+
+fn feed_demo(engine: &mut Engine<'_>) {
+    let mut buf = vec![0u8; 4096];
+    let mut send = |m: &Message<'_>, e: &mut Engine<'_>| {
+        let f = encode(m, &mut buf).expect("encodes").to_vec();
+        e.feed(&f, 0);
+    };
+    let levels = Levels::from_slice(&[Demo::Hydrogen.default_level()]).expect("one level");
+    let side = SIDE as u16;
+    send(
+        &Message::BeginVolume {
+            seq: 0,
+            dims: [side; 3],
+            sample_type: SampleType::F32,
+            spacing: [1.0; 3],
+            levels,
+            axes: AXIS_X | AXIS_Y | AXIS_Z,
+            every: 1,
+        },
+        engine,
+    );
+    let mut data = vec![0u8; SIDE * SIDE * 4];
+    for k in 0..SIDE {
+        for (i, b) in data.chunks_exact_mut(4).enumerate() {
+            b.copy_from_slice(&Demo::Hydrogen.sample(SIDE, i % SIDE, i / SIDE, k).to_le_bytes());
+        }
+        send(&Message::SliceData { seq: 1 + k as u16, slice: k as u16, offset: 0, data: &data }, engine);
+    }
+    send(&Message::EndVolume { seq: 1 + side }, engine);
+    assert!(engine.update(0), "the volume makes a picture");
+}
+
+fn frame(c: &mut Criterion) {
+    let mut mem = Mem {
+        slices: vec![0; 2 * 16 * 1024],
+        rows: vec![0.0; 2 * 128],
+        points: vec![[0; 3]; 2 * POINTS],
+        kinds: vec![0; 2 * POINTS.div_ceil(4)],
+    };
+    let buffers = Buffers::halves(&mut mem.slices, &mut mem.rows, &mut mem.points, &mut mem.kinds, &mut []);
+    let mut engine = Engine::new(EngineConfig::default(), buffers).expect("engine");
+    feed_demo(&mut engine);
+    let (_, screen) = engine.split();
+    let samples = screen.frame().count() as u64;
+    let commands = screen.commands().count();
+    eprintln!("hydrogen {SIDE}^3: {commands} commands, {samples} samples a frame");
+    let mut g = c.benchmark_group("frame");
+    g.throughput(Throughput::Elements(samples));
+    g.bench_function("iter", |b| {
+        b.iter(|| {
+            let mut sum = 0u32;
+            for s in screen.frame() {
+                sum = sum.wrapping_add(u32::from(s.x) ^ u32::from(s.y) << 1 ^ s.beam as u32);
+            }
+            black_box(sum)
+        })
+    });
+    g.bench_function("fill", |b| {
+        let mut half = [Sample::default(); HALF];
+        b.iter(|| {
+            let mut sum = 0u32;
+            let mut f = screen.frame();
+            loop {
+                let n = f.fill(&mut half);
+                for s in half.iter().take(n) {
+                    sum = sum.wrapping_add(u32::from(s.x) ^ u32::from(s.y) << 1 ^ s.beam as u32);
+                }
+                if n < HALF {
+                    break;
+                }
+            }
+            black_box(sum)
+        })
+    });
+    g.bench_function("project", |b| b.iter(|| screen.commands().fold(0f32, |a, c| a + c.point().x)));
+    g.finish();
+}
+
+criterion_group!(benches, frame);
+criterion_main!(benches);
