@@ -56,7 +56,10 @@
 //! - **`LineTo(p)`** from the current position `a`, a segment of length
 //!   `L > 0`: `n = ceil(L / lit_step)` lit samples at `a + (p - a) * k / n`
 //!   for `k = 1 ..= n` (constant beam speed: evenly spaced, at most
-//!   `lit_step` apart before rounding, the last exactly at `p`). Then, at `p`:
+//!   `lit_step` apart before rounding, the last exactly at `p`). The steps
+//!   are computed exactly in fixed point (`a` and `p` rounded to 1/32768
+//!   LSB, no error accumulating along the segment), a few integer
+//!   operations a sample. Then, at `p`:
 //!   - if the next command continues the polyline with a `LineTo(q)` and the
 //!     direction turns by more than `corner_angle_deg` at `p` (the angle
 //!     between `p - a` and `q - p`): `corner_dwell` more lit samples at `p`;
@@ -637,16 +640,67 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Clean<I> {
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 struct Plan {
-    from: Pos,
     to: Pos,
-    /// `(to - from) / steps`: the move of one lit sample.
-    delta: Pos,
+    /// The lit steps' positions, in fixed point.
+    x: Dda,
+    y: Dda,
     /// `to` rounded to DAC codes.
     code: (u16, u16),
     blank: u16,
     step: u32,
     steps: u32,
     lit: u16,
+}
+
+/// Fractional bits of the fixed-point positions of lit steps: a code of up
+/// to 16 bits and 15 fractional bits fit an `i32` with room for rounding,
+/// and a whole move (at most `2^31 - 2^15`) does too.
+const FRAC: u32 = 15;
+
+/// One coordinate of a segment's lit steps, exactly: step `k` of `n` is at
+/// `from + floor(d * k / n)` in fixed point (`d = to - from`), kept as a
+/// quotient and a remainder so that a step is two additions and a compare,
+/// with no error that grows along the segment.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+struct Dda {
+    /// Position of the last step, fixed point, in `0 ..= max << FRAC`.
+    at: i32,
+    /// `d * k mod n` of the last step, in `0 .. n`.
+    err: i32,
+    /// `floor(d / n)`.
+    q: i32,
+    /// `d mod n` (Euclidean), in `0 .. n`.
+    r: i32,
+}
+
+impl Dda {
+    /// `v` (finite, in `0 ..= 65535`) in fixed point, rounded.
+    #[inline]
+    fn fixed(v: f32) -> i32 {
+        (v * (1u32 << FRAC) as f32 + 0.5) as i32
+    }
+
+    /// Steps from `from` to `to` in `n > 0` steps.
+    #[inline]
+    fn new(from: f32, to: f32, n: i32) -> Self {
+        let at = Self::fixed(from);
+        let d = Self::fixed(to) - at;
+        Self { at, err: 0, q: d.div_euclid(n), r: d.rem_euclid(n) }
+    }
+
+    /// Advance one step (of `n`) and return the code there (rounded half
+    /// up; never beyond the segment's ends, so within the DAC range).
+    #[inline(always)]
+    fn step(&mut self, n: i32) -> u16 {
+        self.at += self.q;
+        self.err += self.r;
+        if self.err >= n {
+            self.err -= n;
+            self.at += 1;
+        }
+        ((self.at + (1 << (FRAC - 1))) >> FRAC) as u16
+    }
 }
 
 /// The beam scheduler: an iterator of DAC [`Sample`]s drawing a stream of
@@ -715,7 +769,7 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
             max,
             pos: start,
             lit: false,
-            plan: Plan { from: start, to: start, ..Plan::default() },
+            plan: Plan { to: start, ..Plan::default() },
             ended: false,
             stats: FrameStats::default(),
         }
@@ -773,9 +827,9 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
         let d = self.pos.distance(to);
         self.stats.blank_length += d;
         Plan {
-            from: to,
             to,
-            delta: Pos { x: 0.0, y: 0.0 },
+            x: Dda::default(),
+            y: Dda::default(),
             code: self.code(to),
             blank: self.cfg.settle_samples(d),
             step: 0,
@@ -822,12 +876,12 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
                         _ => self.cfg.dwell_end,
                     };
                     let steps = self.cfg.segment_samples_within(length, self.cap);
-                    // One division a segment, not two a sample.
-                    let inv = 1.0 / steps.max(1) as f32;
+                    // At most 2^17 / MIN_LIT_STEP + 1 (the cap): an i32.
+                    let n = i32::try_from(steps.max(1)).unwrap_or(i32::MAX);
                     Plan {
-                        from,
                         to: p,
-                        delta: Pos { x: (p.x - from.x) * inv, y: (p.y - from.y) * inv },
+                        x: Dda::new(from.x, p.x, n),
+                        y: Dda::new(from.y, p.y, n),
                         code: self.code(p),
                         blank: 0,
                         step: 0,
@@ -864,19 +918,14 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
 }
 
 impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
-    /// The code of lit step `k` (`1 ..= steps`) of the current plan: the
-    /// plan's target for the last, `from + delta * k` rounded for the
-    /// others.
+    /// Advance the current plan by one lit step (`step < steps`) and
+    /// return its code: the plan's target for the last step.
     #[inline(always)]
-    fn step_code(&self, k: u32) -> (u16, u16) {
-        let plan = &self.plan;
-        if k == plan.steps {
-            plan.code
-        } else {
-            let k = k as f32;
-            let (a, d) = (plan.from, plan.delta);
-            self.code(Pos { x: a.x + d.x * k, y: a.y + d.y * k })
-        }
+    fn lit_step(plan: &mut Plan) -> (u16, u16) {
+        plan.step += 1;
+        let n = plan.steps as i32; // at most the cap, an i32
+        let (x, y) = (plan.x.step(n), plan.y.step(n));
+        if plan.step == plan.steps { plan.code } else { (x, y) }
     }
 
     /// The next samples of the frame, handed to `put` one by one, at most
@@ -906,10 +955,8 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
             if plan.step < plan.steps {
                 let left = plan.steps - plan.step;
                 let n = if (left as usize) < room { left } else { room as u32 };
-                let first = plan.step + 1;
-                plan.step += n;
-                for k in first..first + n {
-                    let (x, y) = self.step_code(k);
+                for _ in 0..n {
+                    let (x, y) = Self::lit_step(plan);
                     put(Sample::new(x, y, Beam::On));
                 }
                 self.ran(n as usize, Beam::On);
@@ -973,9 +1020,7 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Iterator for Scheduler<I> {
                 return Some(self.emit(code, Beam::Off));
             }
             if plan.step < plan.steps {
-                plan.step += 1;
-                let k = plan.step;
-                let code = self.step_code(k);
+                let code = Self::lit_step(plan);
                 return Some(self.emit(code, Beam::On));
             }
             if plan.lit > 0 {
