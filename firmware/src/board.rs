@@ -23,12 +23,18 @@
 //!   X/Y buffer into the dual register DHR12RD (X in bits 0..12, Y in bits
 //!   16..28): one write, both channels.
 //! - TIM8's update DMA request (UDE) makes DMA2 stream 1 channel 7
-//!   (TIM8_UP) write the next word of the blank buffer into GPIOB's BSRR.
-//!   It has to be DMA2: DMA1's peripheral port only reaches APB1, not the
-//!   AHB1 GPIO ports (RM0090, figure 1 and section 10.3.3).
+//!   (TIM8_UP) write the next byte of the blank buffer into the low byte of
+//!   GPIOB's ODR (pins PB0..PB7; GPIO registers take byte writes, RM0090
+//!   section 8.4). It has to be DMA2: DMA1's peripheral port only reaches
+//!   APB1, not the AHB1 GPIO ports (RM0090, figure 1 and section 10.3.3).
+//!   A byte a sample rather than a BSRR word saves 3 KB of SRAM; the price
+//!   is that **PB1..PB7 must not be GPIO outputs** (the DMA rewrites their
+//!   output bits with 0 at every sample; as inputs, analog or alternate
+//!   functions, which is how this firmware leaves them, the ODR does not
+//!   reach them).
 //!
 //! Both streams are circular over buffers of the same length and advance by
-//! one word per update event, so they stay in lockstep. The DAC outputs at
+//! one sample per update event, so they stay in lockstep. The DAC outputs at
 //! event `k` the word loaded after event `k - 1`, while the GPIO takes word
 //! `k` at event `k`; so the blank buffer holds each sample's beam one slot
 //! later than the X/Y buffer holds its position ([`DmaOutput::fill`]), and a
@@ -53,7 +59,9 @@
 //! (it logs every access with `-d unimp`). The same [`Streaming`] API
 //! hands out halves at once (no sample clock) and, while recording
 //! ([`Streaming::record`]), the CPU writes each sample itself, in the same
-//! order and format: DHR12RD, then the blank pin's BSRR. It models USART2
+//! order: DHR12RD, then the blank pin (through BSRR, the CPU's atomic way;
+//! the beam each write encodes is the one the DMA's ODR byte would carry).
+//! It models USART2
 //! (its second `-serial`) and SysTick (at 168 MHz, as the board).
 
 use crate::serial::{self, Rx, Tx};
@@ -99,6 +107,16 @@ pub const fn blank_word(beam: Beam) -> u32 {
     if high { 1 << BLANK_PIN } else { 1 << (BLANK_PIN + 16) }
 }
 
+/// The ODR low byte (pins PB0..PB7) that puts the blank pin in `beam`'s
+/// state, as the blank DMA writes it: the pin's bit, the other seven 0.
+#[cfg(not(feature = "qemu"))]
+#[inline(always)]
+const fn blank_byte(beam: Beam) -> u8 {
+    let high = matches!(beam, Beam::Off) == BLANK_ACTIVE_HIGH;
+    if high { 1 << BLANK_PIN } else { 0 }
+}
+const _: () = assert!(BLANK_PIN < 8, "the blank DMA writes the low byte of the port's ODR");
+
 /// DAC_CR: channel enable, trigger enable, DMA enable (channel 1 bits;
 /// channel 2's are 16 higher), and TSEL = 001 (TIM8 TRGO) for channel 1.
 const DAC_EN1: u32 = 1 << 0;
@@ -137,6 +155,9 @@ pub struct Pins {
 /// Set up clocks, the millisecond clock ([`crate::clock`]), the host link
 /// (USART2, receiving from here on), pins, the DAC (beam parked and
 /// blanked) and the watchdog (`watchdog_ms`).
+// Not inlined: its frame (the HAL's temporaries) is gone before the main
+// loop starts.
+#[inline(never)]
 pub fn init(watchdog_ms: u32) -> Board {
     let Some(dp) = pac::Peripherals::take() else { fault() };
     let Some(cp) = cortex_m::Peripherals::take() else { fault() };
@@ -420,23 +441,26 @@ mod dma {
 
     use super::{
         DAC_CH2, DAC_DMAEN1, DAC_EN1, DAC_TEN1, DAC_TSEL1_TIM8, DmaError, Filled, HALF, Out, SAMPLE_RATE_HZ,
-        blank_word, dac_word, pac,
+        blank_byte, dac_word, pac,
     };
     use core::cell::UnsafeCell;
     use core::sync::atomic::{AtomicU8, AtomicU32, Ordering, compiler_fence};
     use isoscope_core::dac::{Beam, SampleSource, Samples};
     use stm32f4xx_hal::interrupt;
 
-    /// A DMA buffer: the CPU writes one half while the DMA reads the other.
+    /// A DMA buffer of `T`s: the CPU writes one half while the DMA reads
+    /// the other.
     #[repr(C, align(4))]
-    struct DmaBuf(UnsafeCell<[u32; 2 * HALF]>);
+    struct DmaBuf<T>(UnsafeCell<[T; 2 * HALF]>);
 
     // SAFETY: accessed only through raw pointers, by `Streaming` (one
     // instance) on halves the DMA is not reading.
-    unsafe impl Sync for DmaBuf {}
+    unsafe impl<T> Sync for DmaBuf<T> {}
 
-    static XY: DmaBuf = DmaBuf(UnsafeCell::new([0; 2 * HALF]));
-    static BLANK: DmaBuf = DmaBuf(UnsafeCell::new([0; 2 * HALF]));
+    /// DHR12RD words (4 KB).
+    static XY: DmaBuf<u32> = DmaBuf(UnsafeCell::new([0; 2 * HALF]));
+    /// GPIOB ODR low bytes (1 KB).
+    static BLANK: DmaBuf<u8> = DmaBuf(UnsafeCell::new([0; 2 * HALF]));
 
     /// Halves the DMA has finished with (bit 0: first, bit 1: second), set
     /// by the interrupt, cleared by the main loop as it refills them.
@@ -494,7 +518,7 @@ mod dma {
         /// `j` of the blank buffer. Returns the next slot.
         fn write(&mut self, half: usize, from: usize, samples: &mut impl SampleSource) -> usize {
             let xy = XY.0.get().cast::<u32>();
-            let blank = BLANK.0.get().cast::<u32>();
+            let blank = BLANK.0.get().cast::<u8>();
             let start = half * HALF + from;
             let end = (half + 1) * HALF;
             let mut slot = start;
@@ -505,7 +529,7 @@ mod dma {
                     // reading this half.
                     unsafe {
                         xy.add(slot).write_volatile(dac_word(s));
-                        blank.add(slot).write_volatile(blank_word(last));
+                        blank.add(slot).write_volatile(blank_byte(last));
                     }
                     last = s.beam;
                     slot += 1;
@@ -578,19 +602,23 @@ mod dma {
                 w.teie().enabled()
             });
 
-            // DMA2 stream 1, channel 7 (TIM8_UP): blank buffer -> GPIOB BSRR.
+            // DMA2 stream 1, channel 7 (TIM8_UP): blank buffer -> the low
+            // byte of GPIOB's ODR (little-endian: its address), a byte a
+            // sample.
             let s1 = dma2.st(1);
             s1.cr().write(|w| unsafe { w.bits(0) });
             while s1.cr().read().en().bit_is_set() {}
             dma2.lifcr().write(|w| unsafe { w.bits(S1_ALL) });
-            s1.par().write(|w| unsafe { w.bits(super::gpiob_bsrr().as_ptr() as u32) });
+            // SAFETY: a read of the register block's address.
+            let odr = unsafe { (*pac::GPIOB::ptr()).odr().as_ptr() as u32 };
+            s1.par().write(|w| unsafe { w.bits(odr) });
             s1.m0ar().write(|w| unsafe { w.bits(BLANK.0.get() as u32) });
             s1.ndtr().write(|w| unsafe { w.bits(2 * HALF as u32) });
             s1.cr().write(|w| unsafe {
                 w.chsel().bits(7);
                 w.pl().very_high();
-                w.msize().bits32();
-                w.psize().bits32();
+                w.msize().bits8();
+                w.psize().bits8();
                 w.minc().incremented();
                 w.circ().enabled();
                 w.dir().memory_to_peripheral();

@@ -90,16 +90,19 @@ fn boot(engine: &mut Engine<'_>) {
         defmt::error!("isoscope: the boot volume could not be encoded");
     }
     let t1 = clock::cycles();
+    let fed_stack = stack::peak();
     engine.update(clock::now_ms());
     let t2 = clock::cycles();
     let mut sink = [0u8; 64];
     while engine.transmit(&mut sink) > 0 {}
     defmt::info!(
-        "isoscope: boot picture {}^3 {}: fed in {} cycles, drawn in {} cycles",
+        "isoscope: boot picture {}^3 {}: fed in {} cycles, drawn in {} cycles; stack {} bytes after feeding, {} after drawing",
         isoscope_scene::SIDE,
         isoscope_scene::DEMO.name(),
         t1.wrapping_sub(t0),
-        t2.wrapping_sub(t1)
+        t2.wrapping_sub(t1),
+        fed_stack,
+        stack::peak()
     );
     log_events(engine);
 }

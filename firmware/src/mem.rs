@@ -7,33 +7,35 @@
 //!
 //! | buffer | bytes | where |
 //! |---|---|---|
-//! | two surfaces: points (6 B) and kinds (2 bits) | `12.5 P` = 64,000 | CCM |
-//! | slices, twice (the stitching and ordering scratch between volumes) | `2 S` = 32 KB | SRAM |
+//! | slices, twice (the stitching and ordering scratch between volumes) | `2 S` = 64 KB | CCM |
+//! | two surfaces: points (6 B) and kinds (2 bits) | `12.5 P` = 102,400 | SRAM |
 //! | rows, twice (`f32`) | `8 E` = 1 KB | SRAM |
 //!
 //! The CCM (64 KB at 0x1000_0000) is reachable by the CPU only, which is
 //! all the engine needs; the DMA buffers of the output path stay in SRAM.
-//! cortex-m-rt neither loads nor zeroes the CCM (section `.ccmram`, NOLOAD,
-//! placed by `ccmram.x`), so its buffers are zeroed here, at run time,
-//! before they are lent.
+//! The two slices fill it exactly. cortex-m-rt neither loads nor zeroes the
+//! CCM (section `.ccmram`, NOLOAD, placed by `ccmram.x`), so its buffers
+//! are zeroed here, at run time, before they are lent.
 //!
-//! QEMU's netduinoplus2 (7.2) has no CCM (a write there is a bus fault), so
-//! under the `qemu` feature everything is in SRAM (same sizes).
+//! QEMU's netduinoplus2 (7.2) has no CCM (a write there is a bus fault) but
+//! maps all 192 KB of the STM32F405's SRAM at 0x2000_0000, so under the
+//! `qemu` feature everything is in SRAM, with the same sizes (`build.rs`
+//! links that build with a 192 KB RAM region).
 
 use core::mem::MaybeUninit;
 use core::sync::atomic::{AtomicBool, Ordering};
 use isoscope_core::engine::{Buffers, Engine, EngineError, Packed};
 use isoscope_scene::{EXTENT, KINDS, POINTS, SLICE_BYTES, engine_config};
 
-/// The CPU-only part, in the core-coupled memory (in SRAM under QEMU).
+/// The slices, in the core-coupled memory (in SRAM under QEMU).
 struct Ccm {
-    points: [[Packed; POINTS]; 2],
-    kinds: [[u8; KINDS]; 2],
+    slices: [u8; 2 * SLICE_BYTES],
 }
 
 /// The rest, in SRAM (.bss, zeroed by cortex-m-rt).
 struct Sram {
-    slices: [u8; 2 * SLICE_BYTES],
+    points: [[Packed; POINTS]; 2],
+    kinds: [[u8; KINDS]; 2],
     rows: [[f32; EXTENT]; 2],
 }
 
@@ -47,7 +49,8 @@ const _: () = assert!(CCM_BYTES <= 64 * 1024, "the CCM holds 64 KB");
 #[cfg_attr(not(feature = "qemu"), unsafe(link_section = ".ccmram"))]
 static mut CCM: MaybeUninit<Ccm> = MaybeUninit::uninit();
 
-static mut SRAM: Sram = Sram { slices: [0; 2 * SLICE_BYTES], rows: [[0.0; EXTENT]; 2] };
+static mut SRAM: Sram =
+    Sram { points: [[[0; 3]; POINTS]; 2], kinds: [[0; KINDS]; 2], rows: [[0.0; EXTENT]; 2] };
 
 /// The engine itself (its frame decoder, answer and event queues), in
 /// SRAM rather than on the stack.
@@ -58,6 +61,10 @@ pub const ENGINE_BYTES: usize = core::mem::size_of::<Engine<'static>>();
 
 /// The engine over all of its memory, with the firmware's settings
 /// ([`engine_config`]). Returns `None` if called twice.
+// Not inlined: `Engine::new` builds the engine (some 2.6 KB) on the stack
+// before it is moved into its static, and that frame must be gone before
+// the main loop starts.
+#[inline(never)]
 pub fn engine() -> Option<Result<&'static mut Engine<'static>, EngineError>> {
     static TAKEN: AtomicBool = AtomicBool::new(false);
     if TAKEN.swap(true, Ordering::SeqCst) {
@@ -72,11 +79,11 @@ pub fn engine() -> Option<Result<&'static mut Engine<'static>, EngineError>> {
         ccm.as_mut_ptr().write_bytes(0, 1);
         (ccm.assume_init_mut(), &mut *core::ptr::addr_of_mut!(SRAM))
     };
-    let [p0, p1] = &mut ccm.points;
-    let [k0, k1] = &mut ccm.kinds;
+    let [p0, p1] = &mut sram.points;
+    let [k0, k1] = &mut sram.kinds;
     let [r0, r1] = &mut sram.rows;
     let buffers = Buffers {
-        slices: &mut sram.slices,
+        slices: &mut ccm.slices,
         rows: [r0, r1],
         front: (p0, k0),
         back: (p1, k1),

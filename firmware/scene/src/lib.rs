@@ -29,16 +29,20 @@ pub const DEMO: Demo = Demo::Hydrogen;
 pub const SIDE: usize = 12;
 
 /// Bytes of the largest z slice the board takes (`nx * ny * sample size`):
-/// 128x128 `u8`, 90x90 `u16`/`i16` or 64x64 `f32`. Between volumes the two
-/// slice buffers are the scratch for stitching and ordering the surface
-/// (about 6 bytes a point): 32 KB order up to some 5,400 points.
-pub const SLICE_BYTES: usize = 16 * 1024;
+/// 128x128 `u8`, `u16` or `i16`, or 90x90 `f32` (`nx` and `ny` at most
+/// [`EXTENT`]). Between volumes the two slice buffers are the scratch
+/// for stitching and ordering the surface (about 7 bytes a point): 64 KB
+/// order all [`POINTS`].
+pub const SLICE_BYTES: usize = 32 * 1024;
 /// The largest `nx` or `ny`.
 pub const EXTENT: usize = 128;
 /// Points each of the two surfaces holds (6 bytes each, and 2 bits of
-/// kind): the limit on picture complexity. Both surfaces take 64,000 bytes,
-/// the core-coupled memory. The boot scene has 936 (after stitching).
-pub const POINTS: usize = 5120;
+/// kind): the limit on picture complexity, counted as contoured (before
+/// stitching joins the per-subgrid pieces, which leaves a little over
+/// half). Both
+/// surfaces take 102,400 bytes of SRAM. The boot scene has 936 (after
+/// stitching).
+pub const POINTS: usize = 8192;
 /// Bytes of the kinds of [`POINTS`] points (2 bits each).
 pub const KINDS: usize = POINTS.div_ceil(4);
 
@@ -60,21 +64,29 @@ pub fn engine_config() -> EngineConfig {
     EngineConfig { firmware: FIRMWARE_VERSION, sample_rate_hz: SAMPLE_RATE_HZ, ..EngineConfig::default() }
 }
 
-/// Bytes of one slice of the boot volume (`f32`).
-const BOOT_SLICE: usize = SIDE * SIDE * 4;
+/// Rows of a boot slice per `SliceData` chunk.
+const BOOT_ROWS: usize = 3;
+/// Bytes of one chunk of a boot slice (`f32`): `BOOT_ROWS` rows.
+const BOOT_CHUNK: usize = BOOT_ROWS * SIDE * 4;
+/// Bytes of an encoded boot frame: the chunk and a `SliceData` header,
+/// CRC, COBS overhead and delimiter, with room to spare (checked by
+/// `encode`, which fails rather than overflow).
+const BOOT_FRAME: usize = BOOT_CHUNK + 64;
+const _: () = assert!(SIDE % BOOT_ROWS == 0 && BOOT_FRAME <= MAX_FRAME_LEN);
 
 /// The frames that put the boot volume on screen, each handed to `feed`
 /// (delimiter included): `BeginVolume` (seq 0; the demo's level, every
-/// plane, unit spacing), one `SliceData` per z slice, `EndVolume`. Feed
-/// them to the engine, then drop its answers. The samples are computed a
-/// slice at a time ([`Demo::sample`]), so this needs about 1.6 KB of stack
-/// and no volume buffer.
+/// plane, unit spacing), `SliceData` chunks of [`BOOT_ROWS`] rows, z slice
+/// after z slice, `EndVolume`. Feed them to the engine, then drop its
+/// answers. The samples are computed a chunk at a time ([`Demo::sample`]),
+/// so this needs about 0.5 KB of stack and no volume buffer: the firmware
+/// boots with the stack its main loop needs.
 ///
 /// # Errors
 /// Only if a frame cannot be encoded (never, for these sizes).
 pub fn boot_frames(mut feed: impl FnMut(&[u8])) -> Result<(), WireError> {
-    let mut buf = [0u8; MAX_FRAME_LEN];
-    let mut data = [0u8; BOOT_SLICE];
+    let mut buf = [0u8; BOOT_FRAME];
+    let mut data = [0u8; BOOT_CHUNK];
     let side = SIDE as u16;
     let levels = Levels::from_slice(&[DEMO.default_level()]).unwrap_or_default();
     let begin = Message::BeginVolume {
@@ -89,12 +101,16 @@ pub fn boot_frames(mut feed: impl FnMut(&[u8])) -> Result<(), WireError> {
     feed(encode(&begin, &mut buf)?);
     let mut seq = 1;
     for k in 0..SIDE {
-        for (idx, bytes) in data.chunks_exact_mut(4).enumerate() {
-            bytes.copy_from_slice(&DEMO.sample(SIDE, idx % SIDE, idx / SIDE, k).to_le_bytes());
+        for row in (0..SIDE).step_by(BOOT_ROWS) {
+            for (idx, bytes) in data.chunks_exact_mut(4).enumerate() {
+                let (i, j) = (idx % SIDE, row + idx / SIDE);
+                bytes.copy_from_slice(&DEMO.sample(SIDE, i, j, k).to_le_bytes());
+            }
+            let offset = (row * SIDE * 4) as u32;
+            let chunk = Message::SliceData { seq, slice: k as u16, offset, data: &data };
+            feed(encode(&chunk, &mut buf)?);
+            seq += 1;
         }
-        let slice = Message::SliceData { seq, slice: k as u16, offset: 0, data: &data };
-        feed(encode(&slice, &mut buf)?);
-        seq += 1;
     }
     feed(encode(&Message::EndVolume { seq }, &mut buf)?);
     Ok(())
