@@ -8,6 +8,9 @@
 //! report samples per second. `frame/project` is the geometry and the view
 //! alone (no beam).
 //!
+//! `volume/hydrogen{16,24}` receives a whole volume: decoding, streaming
+//! contouring and the commit (stitching and ordering).
+//!
 //! Under callgrind (`valgrind --tool=callgrind target/release/deps/frame-*
 //! --bench --profile-time 2 frame/fill`) this shows where a sample's
 //! instructions go.
@@ -16,10 +19,12 @@ use criterion::{Criterion, Throughput, black_box, criterion_group, criterion_mai
 use isoscope_core::dac::Sample;
 use isoscope_core::demo::Demo;
 use isoscope_core::engine::{Buffers, Engine, EngineConfig, Packed};
-use isoscope_core::wire::{AXIS_X, AXIS_Y, AXIS_Z, Levels, Message, SampleType, encode};
+use isoscope_core::wire::{AXIS_X, AXIS_Y, AXIS_Z, Levels, MAX_CHUNK, Message, SampleType, encode};
 
 const SIDE: usize = 16;
-const POINTS: usize = 5120;
+/// The firmware's capacities.
+const POINTS: usize = 8192;
+const SLICE_BYTES: usize = 32 * 1024;
 /// Samples per DMA half in the firmware.
 const HALF: usize = 512;
 
@@ -30,14 +35,15 @@ struct Mem {
     kinds: Vec<u8>,
 }
 
-fn feed_demo(engine: &mut Engine<'_>) {
+fn feed_demo(engine: &mut Engine<'_>, side: usize) {
     let mut buf = vec![0u8; 4096];
     let mut send = |m: &Message<'_>, e: &mut Engine<'_>| {
         let f = encode(m, &mut buf).expect("encodes").to_vec();
         e.feed(&f, 0);
     };
     let levels = Levels::from_slice(&[Demo::Hydrogen.default_level()]).expect("one level");
-    let side = SIDE as u16;
+    let n = side;
+    let side = n as u16;
     send(
         &Message::BeginVolume {
             seq: 0,
@@ -50,27 +56,61 @@ fn feed_demo(engine: &mut Engine<'_>) {
         },
         engine,
     );
-    let mut data = vec![0u8; SIDE * SIDE * 4];
-    for k in 0..SIDE {
+    let mut data = vec![0u8; n * n * 4];
+    let mut seq = 1u16;
+    for k in 0..n {
         for (i, b) in data.chunks_exact_mut(4).enumerate() {
-            b.copy_from_slice(&Demo::Hydrogen.sample(SIDE, i % SIDE, i / SIDE, k).to_le_bytes());
+            b.copy_from_slice(&Demo::Hydrogen.sample(n, i % n, i / n, k).to_le_bytes());
         }
-        send(&Message::SliceData { seq: 1 + k as u16, slice: k as u16, offset: 0, data: &data }, engine);
+        for (j, chunk) in data.chunks(MAX_CHUNK).enumerate() {
+            let offset = (j * MAX_CHUNK) as u32;
+            send(&Message::SliceData { seq, slice: k as u16, offset, data: chunk }, engine);
+            seq += 1;
+        }
     }
-    send(&Message::EndVolume { seq: 1 + side }, engine);
+    send(&Message::EndVolume { seq }, engine);
     assert!(engine.update(0), "the volume makes a picture");
 }
 
+impl Mem {
+    fn new() -> Self {
+        Self {
+            slices: vec![0; 2 * SLICE_BYTES],
+            rows: vec![0.0; 2 * 128],
+            points: vec![[0; 3]; 2 * POINTS],
+            kinds: vec![0; 2 * POINTS.div_ceil(4)],
+        }
+    }
+
+    fn engine(&mut self) -> Engine<'_> {
+        let buffers =
+            Buffers::halves(&mut self.slices, &mut self.rows, &mut self.points, &mut self.kinds, &mut []);
+        Engine::new(EngineConfig::default(), buffers).expect("engine")
+    }
+}
+
+/// Receiving a volume: decoding, streaming contouring, then the commit
+/// (stitching and ordering) in `update`.
+fn volume(c: &mut Criterion) {
+    let mut mem = Mem::new();
+    let mut g = c.benchmark_group("volume");
+    g.sample_size(20);
+    for side in [16, 24] {
+        g.bench_function(format!("hydrogen{side}"), |b| {
+            b.iter(|| {
+                let mut engine = mem.engine();
+                feed_demo(&mut engine, side);
+                black_box(engine.counters().volumes)
+            })
+        });
+    }
+    g.finish();
+}
+
 fn frame(c: &mut Criterion) {
-    let mut mem = Mem {
-        slices: vec![0; 2 * 16 * 1024],
-        rows: vec![0.0; 2 * 128],
-        points: vec![[0; 3]; 2 * POINTS],
-        kinds: vec![0; 2 * POINTS.div_ceil(4)],
-    };
-    let buffers = Buffers::halves(&mut mem.slices, &mut mem.rows, &mut mem.points, &mut mem.kinds, &mut []);
-    let mut engine = Engine::new(EngineConfig::default(), buffers).expect("engine");
-    feed_demo(&mut engine);
+    let mut mem = Mem::new();
+    let mut engine = mem.engine();
+    feed_demo(&mut engine, SIDE);
     let (_, screen) = engine.split();
     let samples = screen.frame().count() as u64;
     let commands = screen.commands().count();
@@ -107,5 +147,5 @@ fn frame(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, frame);
+criterion_group!(benches, frame, volume);
 criterion_main!(benches);

@@ -812,3 +812,97 @@ fn frames_play_on_while_the_next_volume_streams_in() {
     assert_ne!(next, want);
     assert_eq!(shown(&e), batch(&b));
 }
+
+/// An engine that defers contouring ([`EngineConfig::defer_contouring`]),
+/// as the firmware runs it.
+fn deferring(mem: &mut Mem) -> Engine<'_> {
+    let cfg = EngineConfig {
+        optimize: OptimizeConfig { tolerance: 0.0 },
+        defer_contouring: true,
+        ..EngineConfig::default()
+    };
+    Engine::new(cfg, mem.buffers()).unwrap()
+}
+
+/// Feed `bytes` as the firmware does: `piece` bytes at a time, and while a
+/// completed slice has work pending, `rows` rows of it before anything
+/// else. Returns the most rows one slice owed.
+fn feed_deferring(e: &mut Engine<'_>, bytes: &[u8], piece: usize, rows: usize) -> usize {
+    let mut most = 0;
+    let mut rest = bytes;
+    let (mut link, _) = e.split();
+    while !rest.is_empty() {
+        let mut owed = 0;
+        while link.busy() {
+            assert_eq!(link.feed(rest, 0), 0, "no bytes taken while a slice is being contoured");
+            link.contour(rows);
+            owed += rows;
+        }
+        most = most.max(owed);
+        let n = link.feed(&rest[..piece.min(rest.len())], 0);
+        assert!(n > 0);
+        rest = &rest[n..];
+    }
+    most
+}
+
+#[test]
+fn deferred_contouring_draws_the_same_picture_a_few_rows_at_a_time() {
+    for (demo, n, ty, axes, every) in [
+        (Demo::Hydrogen, 16, SampleType::U8, AXIS_X | AXIS_Y | AXIS_Z, 1),
+        (Demo::Gyroid, 13, SampleType::F32, AXIS_X | AXIS_Y | AXIS_Z, 1),
+        (Demo::Torus, 14, SampleType::I16, AXIS_X | AXIS_Z, 1),
+        (Demo::Hydrogen, 14, SampleType::U16, AXIS_X | AXIS_Y | AXIS_Z, 3),
+    ] {
+        let v = Vol { axes, every, ..Vol::demo(demo, n, ty) };
+        let bytes = Host::new().volume(&v);
+        let mut eager_mem = big();
+        let mut eager = engine(&mut eager_mem);
+        eager.feed(&bytes, 0);
+        assert!(eager.update(0));
+        for (piece, rows) in [(bytes.len(), 1), (100, 3), (7, 1000)] {
+            let mut mem = big();
+            let mut e = deferring(&mut mem);
+            let most = feed_deferring(&mut e, &bytes, piece, rows);
+            assert!(most >= 1, "{demo:?}: no slice was deferred");
+            assert!(nacks(&answers(&mut e)).is_empty());
+            assert!(e.update(1));
+            // The same commands in the same order: the same picture, sample
+            // for sample.
+            assert_eq!(picture(&e), picture(&eager), "{demo:?} {ty:?} piece {piece} rows {rows}");
+            assert_eq!(e.frame().collect::<Vec<_>>(), eager.frame().collect::<Vec<_>>());
+            assert_eq!(shown(&e), batch(&v));
+        }
+    }
+}
+
+#[test]
+fn a_transfer_that_stops_mid_job_times_out_and_keeps_the_picture() {
+    let a = Vol::demo(Demo::Torus, 12, SampleType::U8);
+    let b = Vol::demo(Demo::Sphere, 12, SampleType::U8);
+    let mut mem = big();
+    let mut e = deferring(&mut mem);
+    feed_deferring(&mut e, &Host::new().volume(&a), 64, 5);
+    assert!(e.update(0));
+    let before = picture(&e);
+    let mut host = Host::new();
+    let mut bytes = Host::hello();
+    bytes.extend(host.begin(&b));
+    bytes.extend(host.first_slices(&b, MAX_CHUNK, 3).concat());
+    {
+        let (mut link, _) = e.split();
+        let mut rest = &bytes[..];
+        while !rest.is_empty() && !link.busy() {
+            let n = link.feed(rest, 10);
+            rest = &rest[n..];
+        }
+        assert!(link.busy(), "the third slice left work pending");
+        // The host goes away; nobody calls `contour`. Time passes.
+        assert_eq!(link.feed(&[0], 10_000), 1, "the timeout drops the job with the transfer");
+        assert!(!link.busy());
+    }
+    let ev = events(&mut e);
+    assert!(ev.iter().any(|x| matches!(x, Event::Aborted { reason: AbortReason::Timeout, .. })), "{ev:?}");
+    e.update(10_001);
+    assert_eq!(picture(&e), before);
+}

@@ -424,6 +424,11 @@ mod cpu {
             0
         }
 
+        /// As the DMA path's: always, without a sample clock.
+        pub fn ready(&self) -> bool {
+            true
+        }
+
         /// As the DMA path's: finish the current half with the park sample
         /// before a long redraw.
         pub fn hold(&mut self) -> Result<(), DmaError> {
@@ -640,6 +645,12 @@ mod dma {
                 cortex_m::peripheral::NVIC::unmask(pac::Interrupt::DMA2_STREAM1);
             }
             tim8.cr1().write(|w| w.cen().set_bit());
+        }
+
+        /// Whether [`Self::fill_from`] would start at once (a half is open
+        /// or free): the main loop does other work until then.
+        pub fn ready(&self) -> bool {
+            self.open.is_some() || FREE.load(Ordering::SeqCst) != 0 || ERROR.load(Ordering::SeqCst) != 0
         }
 
         /// Wait for a free half; returns it.

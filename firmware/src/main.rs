@@ -35,6 +35,7 @@ mod stack;
 use board::Filled;
 use cortex_m_rt::{ExceptionFrame, entry, exception};
 use isoscope_core::engine::{Engine, Event, Link};
+use isoscope_core::wire::DeviceState;
 use panic_probe as _;
 use serial::{Rx, Tx};
 
@@ -51,6 +52,10 @@ const WATCHDOG_MS: u32 = 3_000;
 /// Received bytes fed to the engine between two half-buffer refills (at
 /// 921,600 baud about 47 arrive in the 512 us of a half).
 const FEED_CHUNK: usize = 256;
+/// Rows of subgrids contoured between two half-buffer refills while a
+/// completed slice has work pending (one row of a 128-wide slice is some
+/// 15,000 instructions); more while the output waits for a free half.
+const CONTOUR_ROWS: usize = 1;
 
 #[entry]
 fn main() -> ! {
@@ -86,7 +91,8 @@ fn main() -> ! {
 /// would, drop the answers (nobody asked), draw it.
 fn boot(engine: &mut Engine<'_>) {
     let t0 = clock::cycles();
-    if isoscope_scene::boot_frames(|frame| engine.feed(frame, clock::now_ms())).is_err() {
+    if isoscope_scene::boot_frames(|frame| isoscope_scene::feed_all(engine, frame, clock::now_ms())).is_err()
+    {
         defmt::error!("isoscope: the boot volume could not be encoded");
     }
     let t1 = clock::cycles();
@@ -133,14 +139,53 @@ fn answer(link: &mut Link<'_, '_>, tx: &mut Tx) {
     tx.pump();
 }
 
-/// Between two half-buffer refills: feed what arrived, send the answers.
-fn serve(link: &mut Link<'_, '_>, rx: &mut Rx, tx: &mut Tx, timing: &mut Timing) {
-    let mut buf = [0u8; FEED_CHUNK];
-    let n = rx.read(&mut buf);
-    if n > 0 {
+/// Received bytes the engine has not taken yet: it stops after a frame
+/// that completes a slice and takes the rest once that slice is contoured.
+struct Inbox {
+    buf: [u8; FEED_CHUNK],
+    start: usize,
+    end: usize,
+}
+
+impl Inbox {
+    const fn new() -> Self {
+        Self { buf: [0; FEED_CHUNK], start: 0, end: 0 }
+    }
+
+    /// The bytes waiting, after topping up from `rx` when there are none.
+    fn bytes(&mut self, rx: &mut Rx) -> &[u8] {
+        if self.start >= self.end {
+            self.start = 0;
+            self.end = rx.read(&mut self.buf);
+        }
+        self.buf.get(self.start..self.end).unwrap_or_default()
+    }
+
+    fn consume(&mut self, n: usize) {
+        self.start = (self.start + n).min(self.end);
+    }
+}
+
+/// Between two half-buffer refills: a row of the pending contouring, or
+/// feed what arrived; send the answers.
+fn serve(link: &mut Link<'_, '_>, rx: &mut Rx, inbox: &mut Inbox, tx: &mut Tx, timing: &mut Timing) {
+    let busy = link.busy();
+    if busy || !inbox.bytes(rx).is_empty() {
+        let receiving = link.state() == DeviceState::Receiving;
         let t0 = clock::cycles();
-        link.feed(buf.get(..n).unwrap_or_default(), clock::now_ms());
-        timing.feed = timing.feed.max(clock::cycles().wrapping_sub(t0));
+        if busy {
+            link.contour(CONTOUR_ROWS);
+        } else {
+            let n = link.feed(inbox.bytes(rx), clock::now_ms());
+            inbox.consume(n);
+        }
+        let dt = clock::cycles().wrapping_sub(t0);
+        timing.feed = timing.feed.max(dt);
+        match (receiving, link.state() == DeviceState::Receiving) {
+            (false, true) => timing.volume_feed = u64::from(dt),
+            (true, _) => timing.volume_feed += u64::from(dt),
+            (false, false) => {}
+        }
     }
     answer(link, tx);
 }
@@ -149,8 +194,12 @@ fn serve(link: &mut Link<'_, '_>, rx: &mut Rx, tx: &mut Tx, timing: &mut Timing)
 /// cycles.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, defmt::Format)]
 struct Timing {
-    /// One `Link::feed` call (contouring a completed slice happens there).
+    /// One `Link::feed` or `Link::contour` call.
     feed: u32,
+    /// The `Link::feed` and `Link::contour` calls of the last volume
+    /// received, from the one that began it to the one that ended it:
+    /// decoding and contouring.
+    volume_feed: u64,
     /// One `Engine::update` that redrew the picture.
     update: u32,
     /// Filling one half buffer (512 samples) from the beam scheduler (on
@@ -224,6 +273,7 @@ impl Report {
 /// between half buffers, the engine updated between frames.
 fn run(board: board::Board, engine: &mut Engine<'static>) -> ! {
     let board::Board { out, mut watchdog, mut rx, mut tx, sysclk_hz, .. } = board;
+    let mut inbox = Inbox::new();
     let mut out = out.start();
     let mut timing = Timing::default();
     let mut report = Report::new(sysclk_hz);
@@ -269,7 +319,12 @@ fn run(board: board::Board, engine: &mut Engine<'static>) -> ! {
                     board::fault();
                 }
             }
-            serve(&mut link, &mut rx, &mut tx, &mut timing);
+            serve(&mut link, &mut rx, &mut inbox, &mut tx, &mut timing);
+            // While the DMA still plays both halves, more of a slice's
+            // contouring (a row at a time, so the refill is not late).
+            while link.busy() && !out.ready() {
+                serve(&mut link, &mut rx, &mut inbox, &mut tx, &mut timing);
+            }
             watchdog.feed();
         }
         if frame.stats().samples == 0 {
@@ -277,7 +332,7 @@ fn run(board: board::Board, engine: &mut Engine<'static>) -> ! {
             if out.pad().is_err() {
                 board::fault();
             }
-            serve(&mut link, &mut rx, &mut tx, &mut timing);
+            serve(&mut link, &mut rx, &mut inbox, &mut tx, &mut timing);
             watchdog.feed();
         }
     }

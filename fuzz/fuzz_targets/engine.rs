@@ -4,7 +4,9 @@
 //!
 //! Input: one configuration byte (the feed chunk size, 1..=64, and the clock
 //! step per chunk: 0, 2, 4 or 6 s, so that transfers time out), then the
-//! bytes on the line. Every chunk is followed by `update`, a transmit, and
+//! bytes on the line. An even chunk size runs the engine as the firmware
+//! does, contouring deferred (`defer_contouring`): bytes the engine does not
+//! take yet are fed again after a few rows of `contour`. Every chunk is followed by `update`, a transmit, and
 //! every third chunk by 200 samples of the frame on screen, played through
 //! `split` while the next chunk is fed, as the firmware does.
 #![no_main]
@@ -48,6 +50,21 @@ fn config() -> EngineConfig {
     EngineConfig::default()
 }
 
+/// Feed all of `bytes`: at once, or, deferring, around `contour` calls.
+fn feed_all(link: &mut isoscope_core::engine::Link<'_, '_>, mut bytes: &[u8], now: u32) {
+    let mut idle = 0;
+    while !bytes.is_empty() {
+        if link.busy() {
+            link.contour(3);
+            continue;
+        }
+        let n = link.feed(bytes, now);
+        bytes = &bytes[n..];
+        idle = if n == 0 { idle + 1 } else { 0 };
+        assert!(idle < 2, "feed took nothing while no work was pending");
+    }
+}
+
 fn surface(e: &Engine<'_>) -> Vec<Command<[u32; 3]>> {
     let key = |p: Point3| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
     e.surface().map(|g| g.commands().map(|c| c.map(key)).collect()).unwrap_or_default()
@@ -87,8 +104,9 @@ fuzz_target!(|data: &[u8]| {
     let Some((&cfg, line)) = data.split_first() else { return };
     let chunk = 1 + usize::from(cfg % 64);
     let step = u32::from(cfg >> 6) * 2000;
+    let defer = chunk % 2 == 0;
     let mut mem = EngineMem::new();
-    let mut e = Engine::new(config(), mem.buffers()).expect("engine");
+    let mut e = Engine::new(EngineConfig { defer_contouring: defer, ..config() }, mem.buffers()).expect("engine");
     let mut dec = FrameDecoder::<256>::new();
     let mut now = 0u32;
     for (k, c) in line.chunks(chunk).enumerate() {
@@ -99,19 +117,19 @@ fuzz_target!(|data: &[u8]| {
             for s in frame.by_ref().take(100) {
                 assert!(s.x <= 4095 && s.y <= 4095);
             }
-            link.feed(c, now);
+            feed_all(&mut link, c, now);
             for s in frame.take(100) {
                 assert!(s.x <= 4095 && s.y <= 4095);
             }
         } else {
-            e.feed(c, now);
+            feed_all(&mut e.split().0, c, now);
         }
         e.update(now);
         drain(&mut e, &mut dec);
     }
     // Recovery: a clean volume shows exactly what it shows on a fresh engine.
     now = now.wrapping_add(1);
-    e.feed(&clean_volume(), now);
+    feed_all(&mut e.split().0, &clean_volume(), now);
     e.update(now);
     drain(&mut e, &mut dec);
     assert_eq!(&surface(&e), expected(), "a clean volume after the noise shows something else");

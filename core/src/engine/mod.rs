@@ -178,11 +178,17 @@ pub struct EngineConfig {
     pub optimize: OptimizeConfig,
     /// A transfer with no accepted message for this long is abandoned (ms).
     pub transfer_timeout_ms: u32,
+    /// Contour a completed slice later, a few rows at a time
+    /// ([`Link::contour`]), instead of inside [`Link::feed`]: for a device
+    /// that must keep its display refreshed (the firmware), where a slice
+    /// of 128 x 128 takes tens of milliseconds. [`Link::feed`] then stops
+    /// taking bytes while that work is pending.
+    pub defer_contouring: bool,
 }
 
 impl Default for EngineConfig {
     /// Every sample type, 1 MS/s, the default view, beam and tolerance, and
-    /// a 5 s transfer timeout.
+    /// a 5 s transfer timeout; slices contoured as they complete.
     fn default() -> Self {
         Self {
             firmware: [0, 1, 0],
@@ -192,6 +198,7 @@ impl Default for EngineConfig {
             beam: BeamConfig::default(),
             optimize: OptimizeConfig::default(),
             transfer_timeout_ms: 5_000,
+            defer_contouring: false,
         }
     }
 }
@@ -531,8 +538,8 @@ impl<'a> Engine<'a> {
     }
 
     /// Take received bytes at time `now_ms`: see [`Link::feed`].
-    pub fn feed(&mut self, bytes: &[u8], now_ms: u32) {
-        self.split().0.feed(bytes, now_ms);
+    pub fn feed(&mut self, bytes: &[u8], now_ms: u32) -> usize {
+        self.split().0.feed(bytes, now_ms)
     }
 
     /// Move answer bytes for the UART into `out`; returns how many.
@@ -697,17 +704,32 @@ impl<'a> Engine<'a> {
 }
 
 impl Link<'_, '_> {
+    /// What the engine is doing ([`Engine::state`]).
+    pub fn state(&self) -> DeviceState {
+        self.dev.state()
+    }
+
     /// Take received bytes at time `now_ms` (milliseconds, wrapping): decode
     /// frames, apply commands, queue answers and events. Never panics, for
-    /// any bytes.
-    pub fn feed(&mut self, bytes: &[u8], now_ms: u32) {
+    /// any bytes. Returns how many bytes it took: all of them, except with
+    /// [`EngineConfig::defer_contouring`], where it stops after the frame
+    /// that completed a slice (feed the rest once [`Link::contour`] is
+    /// done) and takes none while that work is pending.
+    pub fn feed(&mut self, bytes: &[u8], now_ms: u32) -> usize {
         self.dev.check_timeout(now_ms);
-        for &b in bytes {
+        let defer = self.dev.cfg.defer_contouring;
+        if defer && self.dev.stream.busy() {
+            return 0;
+        }
+        for (n, &b) in bytes.iter().enumerate() {
             match self.decoder.push(b) {
                 None => {}
                 Some(Ok(msg)) => {
                     self.dev.counters.frames = self.dev.counters.frames.wrapping_add(1);
                     self.dev.handle(msg, now_ms, self.back);
+                    if defer && self.dev.stream.busy() {
+                        return n + 1;
+                    }
                 }
                 Some(Err(error)) => {
                     self.dev.counters.frame_errors = self.dev.counters.frame_errors.wrapping_add(1);
@@ -725,6 +747,21 @@ impl Link<'_, '_> {
                 }
             }
         }
+        bytes.len()
+    }
+
+    /// Whether a completed slice still has contouring to do (with
+    /// [`EngineConfig::defer_contouring`]): call [`Link::contour`] before
+    /// feeding more.
+    pub fn busy(&self) -> bool {
+        self.dev.stream.busy()
+    }
+
+    /// Contour up to `rows` rows of subgrids of the slice completed last
+    /// (a row is one row of cells of one plane: `nx - 1` of them; a slice
+    /// of `n x n` owes about `3 n`). Returns whether some are left.
+    pub fn contour(&mut self, rows: usize) -> bool {
+        self.dev.stream.work(self.back, rows)
     }
 
     /// Move answer bytes for the UART into `out`; returns how many.
@@ -886,9 +923,10 @@ impl Device<'_> {
                 Ok(())
             }
             Message::SliceData { slice, offset, data, .. } => {
-                self.stream.chunk(slice, offset, data, now_ms, back)
+                self.stream.chunk(slice, offset, data, now_ms, back, self.cfg.defer_contouring)
             }
             Message::EndVolume { .. } => {
+                self.stream.finish(back);
                 let t = self.stream.transfer.ok_or(NackCode::Aborted)?;
                 if t.z < t.spec.dims[2] {
                     self.abort(AbortReason::Missing);

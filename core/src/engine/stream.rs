@@ -7,6 +7,12 @@
 //! the subgrids of the whole chicken-wire surface, with commands and
 //! coordinates bit-identical to contouring the whole volume at once
 //! ([`crate::surface::contour_volume`]); only their order differs.
+//!
+//! That work is a [`Job`] of rows of subgrids (about `3 n` for an `n x n`
+//! slice), done at once when the slice completes or, deferred, a few rows
+//! at a time ([`Stream::work`]) so that the caller can keep its display
+//! refreshed in between; the next slice's data then waits for the job
+//! (the caller stops feeding), or finishes it first if it comes anyway.
 
 use super::geometry::Geometry;
 use crate::command::{Command, CommandSink, Point3};
@@ -69,6 +75,33 @@ pub(crate) struct Transfer {
     pub last_ms: u32,
     /// Contouring so far.
     pub stats: ContourStats,
+    /// What the last completed slice still has to contour.
+    pub job: Option<Job>,
+}
+
+/// The planes a [`Job`] contours, in order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub(crate) enum Phase {
+    /// Rows `j, j + 1` of the x-y slice `z`.
+    Xy,
+    /// Row `z - 1` of subgrids of the x-z slice at `y = j`.
+    Xz,
+    /// Row `z - 1` of subgrids of the y-z slice at `x = i`.
+    Yz,
+}
+
+/// The contouring a completed slice `z` owes: where it stands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub(crate) struct Job {
+    /// The slice.
+    z: u16,
+    /// The slot holding slice `z` (the other holds `z - 1`).
+    slot: usize,
+    phase: Phase,
+    /// The next row (`j`, or `i` in [`Phase::Yz`]).
+    next: u32,
 }
 
 /// The two slices, the decoded rows and the transfer state.
@@ -141,12 +174,25 @@ impl<'a> Stream<'a> {
     /// Start receiving a checked volume.
     pub(crate) fn begin(&mut self, spec: VolumeSpec, now_ms: u32) {
         self.cur = 0;
-        self.transfer =
-            Some(Transfer { spec, z: 0, offset: 0, last_ms: now_ms, stats: ContourStats::default() });
+        self.transfer = Some(Transfer {
+            spec,
+            z: 0,
+            offset: 0,
+            last_ms: now_ms,
+            stats: ContourStats::default(),
+            job: None,
+        });
+    }
+
+    /// Whether a completed slice still has contouring to do.
+    pub(crate) fn busy(&self) -> bool {
+        self.transfer.is_some_and(|t| t.job.is_some())
     }
 
     /// Take a chunk of slice `slice` at byte `offset`; when it completes the
-    /// slice, contour what the slice completes into `geometry`.
+    /// slice, contour what the slice completes into `geometry`, at once or,
+    /// with `defer`, later ([`Stream::work`]). A job still pending from the
+    /// slice before is finished first.
     pub(crate) fn chunk(
         &mut self,
         slice: u16,
@@ -154,7 +200,9 @@ impl<'a> Stream<'a> {
         data: &[u8],
         now_ms: u32,
         geometry: &mut Geometry<'_>,
+        defer: bool,
     ) -> Result<(), NackCode> {
+        self.finish(geometry);
         let t = self.transfer.ok_or(NackCode::Aborted)?;
         let slice_bytes = t.spec.slice_bytes();
         if slice >= t.spec.dims[2] {
@@ -174,11 +222,10 @@ impl<'a> Stream<'a> {
         let (slot, _) = self.halves();
         slot.get_mut(start..end).ok_or(NackCode::DimsOverCapacity)?.copy_from_slice(data);
         let complete = end == slice_bytes;
-        let stats = if complete { self.contour(&t.spec, t.z, geometry) } else { ContourStats::default() };
         if let Some(t) = self.transfer.as_mut() {
             t.last_ms = now_ms;
             if complete {
-                t.stats += stats;
+                t.job = Some(Job { z: t.z, slot: self.cur, phase: Phase::Xy, next: 0 });
                 t.z += 1;
                 t.offset = 0;
             } else {
@@ -187,64 +234,110 @@ impl<'a> Stream<'a> {
         }
         if complete {
             self.cur = 1 - self.cur;
+            if !defer {
+                self.finish(geometry);
+            }
         }
         Ok(())
     }
 
-    /// Contour what slice `z` (in the current slot; `z - 1` in the other)
-    /// completes.
-    fn contour(&mut self, spec: &VolumeSpec, z: u16, geometry: &mut Geometry<'_>) -> ContourStats {
+    /// Finish the pending job, if any.
+    pub(crate) fn finish(&mut self, geometry: &mut Geometry<'_>) {
+        while self.work(geometry, usize::MAX) {}
+    }
+
+    /// Contour up to `rows` rows of subgrids of the pending job into
+    /// `geometry`. Returns whether some are left.
+    pub(crate) fn work(&mut self, geometry: &mut Geometry<'_>, rows: usize) -> bool {
+        let Some(mut t) = self.transfer else { return false };
+        let Some(mut job) = t.job else { return false };
         let mut stats = ContourStats::default();
-        let Ok(mut rc) = RowContourer::new::<Infallible>(spec.levels.as_slice(), Traversal::Corrected) else {
-            return stats;
-        };
+        let mut left = true;
+        if let Ok(mut rc) = RowContourer::new::<Infallible>(t.spec.levels.as_slice(), Traversal::Corrected) {
+            for _ in 0..rows {
+                if !self.row(&t.spec, &mut job, &mut rc, geometry, &mut stats) {
+                    left = false;
+                    break;
+                }
+            }
+        } else {
+            left = false;
+        }
+        t.stats += stats;
+        t.job = left.then_some(job);
+        self.transfer = Some(t);
+        left
+    }
+
+    /// Contour the next row of `job` (see [`Phase`]) and move past it;
+    /// `false` when it has none left.
+    fn row(
+        &mut self,
+        spec: &VolumeSpec,
+        job: &mut Job,
+        rc: &mut RowContourer<'_>,
+        geometry: &mut Geometry<'_>,
+        stats: &mut ContourStats,
+    ) -> bool {
         let [nx, ny] = [usize::from(spec.dims[0]), usize::from(spec.dims[1])];
+        let every = usize::from(spec.every.max(1));
+        // Past the phases that are done or have nothing to do.
+        loop {
+            let at = job.next as usize;
+            let done = match job.phase {
+                Phase::Xy => spec.axes & AXIS_Z == 0 || usize::from(job.z) % every != 0 || at + 1 >= ny,
+                Phase::Xz => job.z == 0 || spec.axes & AXIS_Y == 0 || at >= ny,
+                Phase::Yz => job.z == 0 || spec.axes & AXIS_X == 0 || at >= nx,
+            };
+            if !done {
+                break;
+            }
+            job.next = 0;
+            job.phase = match job.phase {
+                Phase::Xy => Phase::Xz,
+                Phase::Xz => Phase::Yz,
+                Phase::Yz => return false,
+            };
+        }
+        let at = job.next as usize;
         let ty = spec.sample_type;
         let half = self.slots.len() / 2;
         let (s0, s1) = self.slots.split_at(half);
-        let (cur, prev): (&[u8], &[u8]) = if self.cur == 0 { (s0, s1) } else { (s1, s0) };
+        let (cur, prev): (&[u8], &[u8]) = if job.slot == 0 { (s0, s1) } else { (s1, s0) };
         let [r0, r1] = &mut self.rows;
-        let (Some(mut lo), Some(mut hi)) = (r0.get_mut(..nx.max(ny)), r1.get_mut(..nx.max(ny))) else {
-            return stats;
+        let n = if job.phase == Phase::Yz { ny } else { nx };
+        let (Some(l), Some(h)) = (r0.get_mut(..n), r1.get_mut(..n)) else {
+            return false;
         };
         let mut sink = Keep(geometry);
-        let zf = f32::from(z);
-        let every = usize::from(spec.every.max(1));
-        if spec.axes & AXIS_Z != 0 && usize::from(z) % every == 0 {
-            // The x-y slice z, row pair by row pair.
-            decode(ty, cur, 0, 1, lo.get_mut(..nx).unwrap_or(&mut []));
-            for j in 0..ny - 1 {
-                decode(ty, cur, (j + 1) * nx, 1, hi.get_mut(..nx).unwrap_or(&mut []));
-                let (l, h) = (lo.get(..nx).unwrap_or(&[]), hi.get(..nx).unwrap_or(&[]));
-                let _ = rc.row(l, h, j, |x, y| Point3::new(x, y, zf), &mut sink, &mut stats);
-                core::mem::swap(&mut lo, &mut hi);
+        let below = usize::from(job.z.saturating_sub(1));
+        match job.phase {
+            Phase::Xy => {
+                // Rows `at` and `at + 1` of the x-y slice z.
+                decode(ty, cur, at * nx, 1, l);
+                decode(ty, cur, (at + 1) * nx, 1, h);
+                let z = f32::from(job.z);
+                let _ = rc.row(l, h, at, |x, y| Point3::new(x, y, z), &mut sink, stats);
+                job.next += 1;
+            }
+            Phase::Xz => {
+                // Row `z - 1` of subgrids of the x-z slice at y = `at`.
+                decode(ty, prev, at * nx, 1, l);
+                decode(ty, cur, at * nx, 1, h);
+                let y = at as f32;
+                let _ = rc.row(l, h, below, |x, v| Point3::new(x, y, v), &mut sink, stats);
+                job.next += every as u32;
+            }
+            Phase::Yz => {
+                // Row `z - 1` of subgrids of the y-z slice at x = `at`.
+                decode(ty, prev, at, nx, l);
+                decode(ty, cur, at, nx, h);
+                let x = at as f32;
+                let _ = rc.row(l, h, below, |u, v| Point3::new(x, u, v), &mut sink, stats);
+                job.next += every as u32;
             }
         }
-        if z == 0 {
-            return stats;
-        }
-        let below = usize::from(z - 1);
-        if spec.axes & AXIS_Y != 0 {
-            // Row `z - 1` of subgrids of every x-z slice (one per y).
-            for j in (0..ny).step_by(every) {
-                decode(ty, prev, j * nx, 1, lo.get_mut(..nx).unwrap_or(&mut []));
-                decode(ty, cur, j * nx, 1, hi.get_mut(..nx).unwrap_or(&mut []));
-                let (l, h) = (lo.get(..nx).unwrap_or(&[]), hi.get(..nx).unwrap_or(&[]));
-                let y = j as f32;
-                let _ = rc.row(l, h, below, |x, v| Point3::new(x, y, v), &mut sink, &mut stats);
-            }
-        }
-        if spec.axes & AXIS_X != 0 {
-            // Row `z - 1` of subgrids of every y-z slice (one per x).
-            for i in (0..nx).step_by(every) {
-                decode(ty, prev, i, nx, lo.get_mut(..ny).unwrap_or(&mut []));
-                decode(ty, cur, i, nx, hi.get_mut(..ny).unwrap_or(&mut []));
-                let (l, h) = (lo.get(..ny).unwrap_or(&[]), hi.get(..ny).unwrap_or(&[]));
-                let x = i as f32;
-                let _ = rc.row(l, h, below, |u, v| Point3::new(x, u, v), &mut sink, &mut stats);
-            }
-        }
-        stats
+        true
     }
 }
 

@@ -18,7 +18,7 @@
 #![deny(clippy::panic, clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 
 use isoscope_core::demo::Demo;
-use isoscope_core::engine::EngineConfig;
+use isoscope_core::engine::{Engine, EngineConfig};
 use isoscope_core::wire::{
     AXIS_X, AXIS_Y, AXIS_Z, Levels, MAX_FRAME_LEN, Message, SampleType, WireError, encode,
 };
@@ -57,11 +57,33 @@ pub const SAMPLE_RATE_HZ: u32 = 1_000_000;
 pub const FIRMWARE_VERSION: [u8; 3] = [0, 1, 0];
 
 /// The engine's settings: the core's defaults (view, beam, passes, the
-/// 5 s transfer timeout), the firmware's version and sample rate. The
-/// simulator's virtual board (`isoscope-sim device`) uses the same
-/// defaults, so both draw the same samples for the same volume.
+/// 5 s transfer timeout), the firmware's version and sample rate, and
+/// contouring deferred ([`EngineConfig::defer_contouring`]: the main loop
+/// contours a completed slice a row at a time between DMA refills, so the
+/// display keeps refreshing). The simulator's virtual board (`isoscope-sim
+/// device`) uses the same defaults but contours at once, which gives the
+/// same surface: both draw the same samples for the same volume.
 pub fn engine_config() -> EngineConfig {
-    EngineConfig { firmware: FIRMWARE_VERSION, sample_rate_hz: SAMPLE_RATE_HZ, ..EngineConfig::default() }
+    EngineConfig {
+        firmware: FIRMWARE_VERSION,
+        sample_rate_hz: SAMPLE_RATE_HZ,
+        defer_contouring: true,
+        ..EngineConfig::default()
+    }
+}
+
+/// Feed all of `bytes` to `engine`, doing any contouring it defers on the
+/// way (for the boot volume, which nothing needs to wait for).
+pub fn feed_all(engine: &mut Engine<'_>, mut bytes: &[u8], now_ms: u32) {
+    loop {
+        let (mut link, _) = engine.split();
+        while link.contour(usize::MAX) {}
+        if bytes.is_empty() {
+            return;
+        }
+        let n = link.feed(bytes, now_ms);
+        bytes = bytes.get(n..).unwrap_or_default();
+    }
 }
 
 /// Rows of a boot slice per `SliceData` chunk.
