@@ -71,8 +71,10 @@ use stm32f4xx_hal::pac;
 use stm32f4xx_hal::prelude::*;
 use stm32f4xx_hal::watchdog::IndependentWatchdog;
 
-/// Samples per second (both DAC channels and the blank pin).
-pub const SAMPLE_RATE_HZ: u32 = 1_000_000;
+/// Samples per second (both DAC channels and the blank pin): the engine's
+/// setting ([`isoscope_scene::SAMPLE_RATE_HZ`]), so that beam times in
+/// microseconds and the refresh rate it reports hold.
+pub use isoscope_scene::SAMPLE_RATE_HZ;
 
 /// The blank pin's number on its port (PB0).
 pub const BLANK_PIN: u32 = 0;
