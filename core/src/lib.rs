@@ -79,6 +79,7 @@ pub mod dac;
 pub mod demo;
 pub mod display;
 pub mod engine;
+mod fastmath;
 pub mod grid;
 pub mod mock_dac;
 pub mod pen;

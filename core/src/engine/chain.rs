@@ -27,6 +27,7 @@
 //! that only moves on, `O(cells)` in all).
 
 use super::geometry::{Geometry, Kind, Packed};
+use crate::fastmath::sqrt;
 
 /// No entry.
 const NONE: u32 = u32::MAX;
@@ -320,7 +321,7 @@ impl<'s, 'g, 'a> Index<'s, 'g, 'a> {
         let unit = |a: Packed, b: Packed| {
             let (a, b) = (v(a), v(b));
             let d = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-            let n = libm::sqrtf(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+            let n = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
             if n > 0.0 { [d[0] / n, d[1] / n, d[2] / n] } else { [0.0; 3] }
         };
         let dir_in = prev.map(|p| unit(p, cur));
@@ -351,10 +352,12 @@ impl<'s, 'g, 'a> Index<'s, 'g, 'a> {
         for r in 0..=RINGS {
             for dz in -r..=r {
                 for dy in -r..=r {
-                    for dx in -r..=r {
-                        if dx.abs().max(dy.abs()).max(dz.abs()) != r {
-                            continue;
-                        }
+                    // The shell of ring r only: inside its faces, just the
+                    // two cells at dx = -r and dx = r (the order the full
+                    // cube would visit them in).
+                    let face = dz.abs() == r || dy.abs() == r;
+                    let step = if face || r == 0 { 1 } else { 2 * r as usize };
+                    for dx in (-r..=r).step_by(step) {
                         let (x, y, z) = (cx + dx, cy + dy, cz + dz);
                         if !((0..nx).contains(&x) && (0..ny).contains(&y) && (0..nz).contains(&z)) {
                             continue;
@@ -587,7 +590,7 @@ impl Tour {
         if n < 3 {
             return;
         }
-        let d = |a: Packed, b: Packed| libm::sqrtf(dist2(a, b) as f32);
+        let d = |a: Packed, b: Packed| sqrt(dist2(a, b) as f32);
         // Bounded work: 8 passes of WINDOW moves a step.
         let mut budget: u64 = 8 * WINDOW as u64 * n as u64;
         let mut improved = true;
@@ -645,9 +648,8 @@ impl Tour {
             let (f, end) = self.get(&x.w, k);
             if x.is_loop(f) {
                 let next = if k + 1 < self.len { Some(self.ends(x, k + 1).0) } else { None };
-                let cost = |v: Packed| {
-                    libm::sqrtf(dist2(prev, v) as f32) + next.map_or(0.0, |n| libm::sqrtf(dist2(v, n) as f32))
-                };
+                let cost =
+                    |v: Packed| sqrt(dist2(prev, v) as f32) + next.map_or(0.0, |n| sqrt(dist2(v, n) as f32));
                 let (from, to) = x.span(f);
                 let mut best = (cost(x.point(end)), end);
                 for i in from..to {
@@ -714,7 +716,7 @@ impl Walk {
         let first = x.point(end);
         if !(join || first == self.cur) || !self.out.open {
             self.out.finish(dst, stats);
-            stats.travel += libm::sqrtf(dist2(first, self.cur) as f32) / f32::from(1u16 << x.src.shift());
+            stats.travel += sqrt(dist2(first, self.cur) as f32) / f32::from(1u16 << x.src.shift());
         }
         let mut emit = |i: usize| {
             let q = x.point(i);

@@ -1,0 +1,83 @@
+//! `sqrtf` and `ceilf` for the hot paths (the beam scheduler per segment,
+//! stitching and ordering per candidate). `libm`'s are software on
+//! `thumbv7em` (about a hundred instructions each); these are a few float
+//! operations, and host and MCU compute them bit for bit alike.
+
+/// `ceilf` for hot paths: exact below 2^31 (a float conversion and a
+/// compare instead of a software call on the MCU); `libm` beyond, and for
+/// NaN.
+#[inline]
+pub(crate) fn ceil(v: f32) -> f32 {
+    if v.is_finite() && v.abs() < 2_147_483_648.0 {
+        let t = v as i32 as f32; // truncates toward zero, exactly
+        if t < v {
+            t + 1.0
+        } else if v.is_sign_negative() && t == 0.0 {
+            -0.0 // ceil(-0.5) and ceil(-0.0) are -0.0, as ceilf says
+        } else {
+            t
+        }
+    } else {
+        libm::ceilf(v)
+    }
+}
+
+/// `sqrtf` for hot paths. `libm`'s is software on `thumbv7em` (stable
+/// `no_std` Rust cannot reach the FPU's `VSQRT`) and costs about a hundred
+/// instructions; this one is the bit-pattern estimate of `1 / sqrt(x)`, three
+/// Newton steps (relative error below 1e-6) and `x * r`, then snapped to
+/// the nearest whole number when that squares back to `x` exactly, so that
+/// whole lengths (axis-aligned segments, 3-4-5 triangles) stay whole and
+/// sample counts do not flip. Zero, subnormals, infinity and NaN go to
+/// `libm`.
+#[inline]
+pub(crate) fn sqrt(x: f32) -> f32 {
+    if !(f32::MIN_POSITIVE..f32::INFINITY).contains(&x) {
+        return libm::sqrtf(x);
+    }
+    let h = 0.5 * x;
+    let mut r = f32::from_bits(0x5f37_5a86 - (x.to_bits() >> 1));
+    r *= 1.5 - h * r * r;
+    r *= 1.5 - h * r * r;
+    r *= 1.5 - h * r * r;
+    let s = x * r;
+    if s < 16_777_216.0 {
+        let m = (s + 0.5) as u32 as f32;
+        if m * m == x {
+            return m;
+        }
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hot_path_sqrt_and_ceil_match_libm() {
+        // Whole squares come out whole; everything else within 1e-6.
+        for k in 1..=5000u32 {
+            let v = (k * k) as f32;
+            assert_eq!(sqrt(v), k as f32, "sqrt({v})");
+        }
+        assert_eq!(sqrt(3.0 * 3.0 + 4.0 * 4.0), 5.0);
+        let mut x = 1.17e-38f32;
+        while x < 1e30 {
+            let (a, b) = (sqrt(x), libm::sqrtf(x));
+            assert!(((a - b) / b).abs() < 1e-6, "sqrt({x}) = {a}, libm {b}");
+            x *= 1.0137;
+        }
+        for v in [0.0f32, -0.0, 1e-45, -1.0, f32::INFINITY, f32::NAN] {
+            assert_eq!(sqrt(v).to_bits(), libm::sqrtf(v).to_bits(), "{v}");
+        }
+        let mut v = -70_000.25f32;
+        while v < 70_000.0 {
+            assert_eq!(ceil(v).to_bits(), libm::ceilf(v).to_bits(), "ceil({v})");
+            v += 0.37;
+        }
+        for v in [0.0f32, -0.0, -0.5, 0.5, 2.0, 3e9, -3e9, 16_777_217.0, f32::INFINITY, f32::NAN] {
+            assert_eq!(ceil(v).to_bits(), libm::ceilf(v).to_bits(), "ceil({v})");
+        }
+    }
+}
