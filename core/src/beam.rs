@@ -562,7 +562,17 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Clean<I> {
                 self.pen = None;
                 continue;
             }
-            let p = Pos { x: p.x.clamp(0.0, self.max), y: p.y.clamp(0.0, self.max) };
+            // Not `f32::clamp`, which checks its bounds every call.
+            let fit = |v: f32| {
+                if v < 0.0 {
+                    0.0
+                } else if v > self.max {
+                    self.max
+                } else {
+                    v
+                }
+            };
+            let p = Pos { x: fit(p.x), y: fit(p.y) };
             match command {
                 Command::MoveTo(_) => {
                     self.pen = Some(p);
@@ -672,8 +682,6 @@ pub struct Scheduler<I> {
     /// `cos(corner_angle_deg)`: a vertex is a corner when the cosine of its
     /// turn is below this.
     corner_cos: f32,
-    /// The largest DAC code, as `f32`.
-    max: f32,
     /// [`BeamConfig::segment_cap`].
     cap: u32,
     pos: Pos,
@@ -720,7 +728,6 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
             cap: cfg.segment_cap(),
             cfg,
             corner_cos,
-            max,
             pos: start,
             lit: false,
             plan: Plan { to: start, ..Plan::default() },
@@ -749,12 +756,12 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
 
     #[inline]
     fn code(&self, p: Pos) -> (u16, u16) {
-        let max = self.max;
-        // Round half away from zero, as `roundf`, for the non-negative
-        // clamped value: `v + 0.5` is exact below 2^22 (codes are at most
-        // 65535), and `as` truncates (and saturates: NaN gives 0). A few
-        // instructions instead of a call: this runs for every sample.
-        let c = |v: f32| (v.clamp(0.0, max) + 0.5) as u16;
+        // A `Pos` is finite and in `0 ..= max` (cleaned, or the park
+        // position). Round half away from zero, as `roundf`: `v + 0.5` is
+        // exact below 2^22 (codes are at most 65535), and `as` truncates
+        // (and saturates, should anything slip through). A few instructions
+        // instead of a call: this runs for every command.
+        let c = |v: f32| (v + 0.5) as u16;
         (c(p.x), c(p.y))
     }
 
@@ -909,10 +916,19 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
             if plan.step < plan.steps {
                 let left = plan.steps - plan.step;
                 let n = if (left as usize) < room { left } else { room as u32 };
-                for _ in 0..n {
-                    let (x, y) = Self::lit_step(plan);
-                    put(Sample::new(x, y, Beam::On));
+                // The steps before the last in registers (the DDA's state is
+                // written back once), then the last, exactly at the target.
+                let last = n == left;
+                let steps = plan.steps as i32; // at most the cap, an i32
+                let (mut x, mut y) = (plan.x, plan.y);
+                for _ in 0..n - u32::from(last) {
+                    put(Sample::new(x.step(steps), y.step(steps), Beam::On));
                 }
+                if last {
+                    put(Sample::new(plan.code.0, plan.code.1, Beam::On));
+                }
+                (plan.x, plan.y) = (x, y);
+                plan.step += n;
                 self.ran(n as usize, Beam::On);
                 done += n as usize;
                 continue;

@@ -559,18 +559,29 @@ impl ViewTransform {
     /// [`ViewTransform::project`] gives NaN.
     #[inline]
     pub fn try_project(&self, p: Point3) -> Option<ScreenPoint> {
+        let s = self.project_raw(p);
+        (s.x.is_finite() && s.y.is_finite()).then_some(s)
+    }
+
+    /// [`ViewTransform::project`] without the last check: a point behind
+    /// the camera is NaN, one that overflows (or a NaN depth) infinite or
+    /// NaN. For the beam
+    /// scheduler, which skips both (and checks anyway): one check a point,
+    /// not two.
+    #[inline]
+    pub(crate) fn project_raw(&self, p: Point3) -> ScreenPoint {
         let (qx, qy, qz) = (p.x - self.origin.x, p.y - self.origin.y, p.z - self.origin.z);
         let (mut x, mut y) = (self.sx.eval(qx, qy, qz), self.sy.eval(qx, qy, qz));
         if self.perspective {
             let d = self.depth.eval(qx, qy, qz);
             if d <= 0.0 {
-                return None;
+                return ScreenPoint::new(f32::NAN, f32::NAN);
             }
             let inv = 1.0 / d;
             x = x * inv + self.centre;
             y = y * inv + self.centre;
         }
-        (x.is_finite() && y.is_finite()).then_some(ScreenPoint::new(x, y))
+        ScreenPoint::new(x, y)
     }
 
     /// DAC units per physical unit (voxel size times spacing) at the depth

@@ -111,7 +111,6 @@ pub const fn blank_word(beam: Beam) -> u32 {
 
 /// The ODR low byte (pins PB0..PB7) that puts the blank pin in `beam`'s
 /// state, as the blank DMA writes it: the pin's bit, the other seven 0.
-#[cfg(not(feature = "qemu"))]
 #[inline(always)]
 const fn blank_byte(beam: Beam) -> u8 {
     let high = matches!(beam, Beam::Off) == BLANK_ACTIVE_HIGH;
@@ -365,11 +364,24 @@ pub use dma::Streaming;
 #[cfg(feature = "qemu")]
 mod cpu {
     //! The output under QEMU: the same API as the DMA path, without a
-    //! sample clock. Halves are handed out at once; while recording, the
-    //! CPU writes each sample to the DAC and the blank pin.
+    //! sample clock. Halves are handed out at once. Every sample is written
+    //! to a RAM half buffer in the DMA path's format (so that QEMU's
+    //! instruction counts are the board's refill work); while recording, the
+    //! CPU also writes it to the DAC and the blank pin.
 
-    use super::{DmaError, Filled, HALF, Out};
-    use isoscope_core::dac::{SampleSource, Samples};
+    use super::{DmaError, Filled, HALF, Out, blank_byte, dac_word};
+    use core::cell::UnsafeCell;
+    use isoscope_core::dac::{Beam, SampleSource, Samples};
+
+    /// A half buffer of `T`s, as the DMA path's.
+    struct HalfBuf<T>(UnsafeCell<[T; HALF]>);
+
+    // SAFETY: accessed only by `Streaming` (one instance), through raw
+    // pointers.
+    unsafe impl<T> Sync for HalfBuf<T> {}
+
+    static XY: HalfBuf<u32> = HalfBuf(UnsafeCell::new([0; HALF]));
+    static BLANK: HalfBuf<u8> = HalfBuf(UnsafeCell::new([0; HALF]));
 
     /// The running output.
     pub struct Streaming {
@@ -391,7 +403,20 @@ mod cpu {
         pub fn fill_from(&mut self, samples: &mut impl SampleSource) -> Result<Filled, DmaError> {
             let (out, recording) = (&mut self.out, self.recording);
             let room = HALF - self.slot;
+            let xy = XY.0.get().cast::<u32>();
+            let blank = BLANK.0.get().cast::<u8>();
+            let mut slot = self.slot;
+            let mut last = Beam::Off;
             let n = samples.fill_with(room, |s| {
+                if slot < HALF {
+                    // SAFETY: `slot < HALF`.
+                    unsafe {
+                        xy.add(slot).write_volatile(dac_word(s));
+                        blank.add(slot).write_volatile(blank_byte(last));
+                    }
+                    last = s.beam;
+                    slot += 1;
+                }
                 if recording {
                     out.write(s);
                 }

@@ -466,7 +466,8 @@ impl Iterator for Projected<'_> {
         // By reference: the transform is some twenty words, and this runs
         // for every point of every frame.
         let t = self.transform.as_ref()?;
-        self.commands.next().map(|c| c.map(|p| t.project(p)))
+        // Unchecked: the scheduler skips points that are not finite.
+        self.commands.next().map(|c| c.map(|p| t.project_raw(p)))
     }
 }
 
@@ -667,7 +668,9 @@ impl<'a> Engine<'a> {
         Scheduler::new(self.commands(), &self.dev.beam)
     }
 
-    /// The picture's drawing commands on the screen, in drawing order.
+    /// The picture's drawing commands on the screen, in drawing order. A
+    /// point the view cannot project (behind a perspective camera) is not
+    /// finite, and the beam scheduler skips it.
     pub fn commands(&self) -> Projected<'_> {
         Projected { commands: self.front.commands(), transform: self.transform }
     }
