@@ -508,7 +508,7 @@ where
     I: IntoIterator<Item = Command<ScreenPoint>>,
 {
     let mut scheduler = Scheduler::new(commands, cfg);
-    scheduler.by_ref().for_each(drop);
+    scheduler.skip_to_end();
     scheduler.stats()
 }
 
@@ -963,6 +963,25 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
                 *slot = s;
             }
         })
+    }
+
+    /// Run to the end of the frame without making the samples, only
+    /// counting them: [`Scheduler::stats`] is then the frame's, as if every
+    /// sample had been taken (a few operations a command, not a few a
+    /// sample).
+    pub fn skip_to_end(&mut self) {
+        loop {
+            let plan = &mut self.plan;
+            let (blank, steps, lit) = (plan.blank, plan.steps - plan.step.min(plan.steps), plan.lit);
+            (plan.blank, plan.step, plan.lit) = (0, plan.steps, 0);
+            self.ran(usize::from(blank), Beam::Off);
+            self.ran(steps as usize, Beam::On);
+            self.ran(usize::from(lit), Beam::On);
+            match self.next_plan() {
+                Some(plan) => self.plan = plan,
+                None => break,
+            }
+        }
     }
 
     /// Account for `n` samples just emitted with `beam`.

@@ -589,6 +589,13 @@ proptest! {
         prop_assert_eq!(sch.fill_with(5, |_| ()), 0, "it stays ended");
         prop_assert_eq!(sch.next(), None);
         prop_assert_eq!(sch.stats(), frame_stats(cmds.iter().copied(), &cfg));
+        // Skipping the rest after a few samples counts what it skipped.
+        let mut skip = Scheduler::new(cmds.iter().copied(), &cfg);
+        skip.fill_with(chunks[0], |_| ());
+        skip.skip_to_end();
+        prop_assert_eq!(skip.stats(), sch.stats());
+        prop_assert_eq!(skip.next(), None);
+        prop_assert_eq!(skip.position(), sch.position());
         let mut it = Samples(want.iter().copied());
         let mut again = Vec::new();
         while it.fill_with(7, |s| again.push(s)) == 7 {}
