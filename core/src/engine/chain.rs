@@ -77,23 +77,28 @@ pub(crate) enum Pass {
     Order,
 }
 
-/// `u32` words over a byte buffer (the scratch is lent as bytes).
-struct Words<'s>(&'s mut [u8]);
+/// `u32` words over a byte buffer (the scratch is lent as bytes), as
+/// 4-byte chunks: one bounds check and one load a word.
+struct Words<'s>(&'s mut [[u8; 4]]);
 
-impl Words<'_> {
+impl<'s> Words<'s> {
+    fn new(bytes: &'s mut [u8]) -> Self {
+        Self(bytes.as_chunks_mut::<4>().0)
+    }
+
     fn len(&self) -> usize {
-        self.0.len() / 4
+        self.0.len()
     }
 
     #[inline]
     fn get(&self, i: usize) -> u32 {
-        self.0.get(4 * i..4 * i + 4).and_then(|b| b.try_into().ok()).map_or(NONE, u32::from_le_bytes)
+        self.0.get(i).map_or(NONE, |b| u32::from_le_bytes(*b))
     }
 
     #[inline]
     fn set(&mut self, i: usize, v: u32) {
-        if let Some(b) = self.0.get_mut(4 * i..4 * i + 4) {
-            b.copy_from_slice(&v.to_le_bytes());
+        if let Some(b) = self.0.get_mut(i) {
+            *b = v.to_le_bytes();
         }
     }
 }
@@ -136,7 +141,7 @@ struct Index<'s, 'g, 'a> {
 
 impl<'s, 'g, 'a> Index<'s, 'g, 'a> {
     fn build(src: &'g Geometry<'a>, scratch: &'s mut [u8], any_vertex: bool) -> Option<Self> {
-        let mut w = Words(scratch);
+        let mut w = Words::new(scratch);
         let points = src.len();
         let mut frags = 0usize;
         let mut top = [0u16; 3];
@@ -153,10 +158,15 @@ impl<'s, 'g, 'a> Index<'s, 'g, 'a> {
         if frags == 0 || points >= DRAWN as usize || words < frags + points + 1 {
             return None;
         }
-        // The finest grid with about one cell per two ends (and what the
-        // scratch holds): two ends a fragment, or every point of the loops.
+        // The finest grid with up to two cells an end (the surface, a 2D
+        // sheet, passes through a few of the cells of its 3D box, so the
+        // lists in those stay short) that the scratch holds beside the
+        // fragments, the links and the tour: two ends a fragment, or every
+        // point of the loops.
         let ends = if any_vertex { points } else { 2 * frags };
-        let budget = ((words - frags - points) as u64).min((ends as u64 / 2).max(1));
+        let tour = if any_vertex { 2 * frags } else { 0 };
+        let spare = words.saturating_sub(frags + points + tour) as u64;
+        let budget = spare.min((ends as u64 * 2).max(1)).max(1);
         let cells_at = |b: u32| -> u64 { top.iter().map(|&t| u64::from((u32::from(t) >> b) + 1)).product() };
         let mut bits = 0u32;
         while bits < 16 && cells_at(bits) > budget {
@@ -168,7 +178,6 @@ impl<'s, 'g, 'a> Index<'s, 'g, 'a> {
         let links = heads + cells;
         // The order pass keeps its tour (fragment and entry point, two
         // words a fragment) after the links.
-        let tour = if any_vertex { 2 * frags } else { 0 };
         if links + points + tour > words {
             return None;
         }
