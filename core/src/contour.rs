@@ -118,10 +118,10 @@ pub fn contour_subgrid<P, S: CommandSink<P>>(
             // equal-valued edges met twice and lone points.
             let mut pen = Pen::new();
             visit(sub, tpl, level, traversal, |conn, x| {
-                if err.is_none() {
-                    if let Err(e) = pen.step(conn, x, &mut out) {
-                        err = Some(e);
-                    }
+                if err.is_none()
+                    && let Err(e) = pen.step(conn, x, &mut out)
+                {
+                    err = Some(e);
                 }
             });
             if err.is_none() {

@@ -35,16 +35,16 @@ pub(crate) fn lane<'a, T: Sample>(
     buf: &'a mut [f32; BLOCK + 1],
 ) -> &'a [f32] {
     let n = n.min(BLOCK + 1);
-    if stride == 1 {
-        if let Some(src) = data.get(start..start.saturating_add(n)) {
-            if let Some(f) = T::as_f32s(src) {
-                return f;
-            }
-            for (o, s) in buf.iter_mut().zip(src) {
-                *o = s.to_f32();
-            }
-            return buf.get(..n).unwrap_or(&[]);
+    if stride == 1
+        && let Some(src) = data.get(start..start.saturating_add(n))
+    {
+        if let Some(f) = T::as_f32s(src) {
+            return f;
         }
+        for (o, s) in buf.iter_mut().zip(src) {
+            *o = s.to_f32();
+        }
+        return buf.get(..n).unwrap_or(&[]);
     }
     for (k, o) in buf.iter_mut().take(n).enumerate() {
         *o = data.get(start.wrapping_add(k.wrapping_mul(stride))).map_or(f32::NAN, |s| s.to_f32());

@@ -21,11 +21,11 @@ fn picture<const N: usize>(l: &DisplayList<N>) -> (BTreeSet<Seg>, BTreeSet<(u32,
         match c {
             Command::MoveTo(p) => at = Some(p),
             Command::LineTo(p) => {
-                if let Some(a) = at {
-                    if k(a) != k(p) {
-                        let (x, y) = (k(a), k(p));
-                        segs.insert(if x < y { (x, y) } else { (y, x) });
-                    }
+                if let Some(a) = at
+                    && k(a) != k(p)
+                {
+                    let (x, y) = (k(a), k(p));
+                    segs.insert(if x < y { (x, y) } else { (y, x) });
                 }
                 at = Some(p);
             }

@@ -485,10 +485,10 @@ fn contour(args: &ContourArgs) -> Result<()> {
             }
             None => {
                 let out = std::io::stdout().lock();
-                if let Err(e) = write_csv(std::io::BufWriter::new(out), &result, &levels) {
-                    if e.kind() != std::io::ErrorKind::BrokenPipe {
-                        return Err(e).context("cannot write to standard output");
-                    }
+                if let Err(e) = write_csv(std::io::BufWriter::new(out), &result, &levels)
+                    && e.kind() != std::io::ErrorKind::BrokenPipe
+                {
+                    return Err(e).context("cannot write to standard output");
                 }
             }
         }

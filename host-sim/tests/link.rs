@@ -70,7 +70,7 @@ impl Write for Line {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
         let mut data = buf.to_vec();
         for b in &mut data {
-            if self.next() % self.corrupt == 0 {
+            if self.next().is_multiple_of(self.corrupt) {
                 *b ^= 0x10;
             }
         }
@@ -82,7 +82,7 @@ impl Write for Line {
         let mut out = vec![0u8; 4096];
         let n = e.transmit(&mut out);
         drop(e);
-        if n > 0 && self.next() % self.lose != 0 {
+        if n > 0 && !self.next().is_multiple_of(self.lose) {
             let _ = self.answers.send(out[..n].to_vec());
         }
         Ok(buf.len())

@@ -846,11 +846,11 @@ impl Device<'_> {
     }
 
     fn check_timeout(&mut self, now_ms: u32) {
-        if let Some(t) = self.stream.transfer {
-            if now_ms.wrapping_sub(t.last_ms) > self.cfg.transfer_timeout_ms {
-                self.abort(AbortReason::Timeout);
-                self.status();
-            }
+        if let Some(t) = self.stream.transfer
+            && now_ms.wrapping_sub(t.last_ms) > self.cfg.transfer_timeout_ms
+        {
+            self.abort(AbortReason::Timeout);
+            self.status();
         }
     }
 
