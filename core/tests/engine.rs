@@ -825,9 +825,10 @@ fn deferring(mem: &mut Mem) -> Engine<'_> {
 }
 
 /// Feed `bytes` as the firmware does: `piece` bytes at a time, and while a
-/// completed slice has work pending, `rows` rows of it before anything
-/// else. Returns the most rows one slice owed.
-fn feed_deferring(e: &mut Engine<'_>, bytes: &[u8], piece: usize, rows: usize) -> usize {
+/// completed slice has work pending, `cells` cells of it (whole rows, at
+/// least one) before anything else. Returns the most `contour` calls one
+/// slice took.
+fn feed_deferring(e: &mut Engine<'_>, bytes: &[u8], piece: usize, cells: usize) -> usize {
     let mut most = 0;
     let mut rest = bytes;
     let (mut link, _) = e.split();
@@ -835,8 +836,8 @@ fn feed_deferring(e: &mut Engine<'_>, bytes: &[u8], piece: usize, rows: usize) -
         let mut owed = 0;
         while link.busy() {
             assert_eq!(link.feed(rest, 0), 0, "no bytes taken while a slice is being contoured");
-            link.contour(rows);
-            owed += rows;
+            link.contour(cells);
+            owed += 1;
         }
         most = most.max(owed);
         let n = link.feed(&rest[..piece.min(rest.len())], 0);
@@ -860,16 +861,16 @@ fn deferred_contouring_draws_the_same_picture_a_few_rows_at_a_time() {
         let mut eager = engine(&mut eager_mem);
         eager.feed(&bytes, 0);
         assert!(eager.update(0));
-        for (piece, rows) in [(bytes.len(), 1), (100, 3), (7, 1000)] {
+        for (piece, cells) in [(bytes.len(), 1), (100, 30), (7, 1000)] {
             let mut mem = big();
             let mut e = deferring(&mut mem);
-            let most = feed_deferring(&mut e, &bytes, piece, rows);
+            let most = feed_deferring(&mut e, &bytes, piece, cells);
             assert!(most >= 1, "{demo:?}: no slice was deferred");
             assert!(nacks(&answers(&mut e)).is_empty());
             assert!(e.update(1));
             // The same commands in the same order: the same picture, sample
             // for sample.
-            assert_eq!(picture(&e), picture(&eager), "{demo:?} {ty:?} piece {piece} rows {rows}");
+            assert_eq!(picture(&e), picture(&eager), "{demo:?} {ty:?} piece {piece} cells {cells}");
             assert_eq!(e.frame().collect::<Vec<_>>(), eager.frame().collect::<Vec<_>>());
             assert_eq!(shown(&e), batch(&v));
         }

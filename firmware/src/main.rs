@@ -52,10 +52,11 @@ const WATCHDOG_MS: u32 = 3_000;
 /// Received bytes fed to the engine between two half-buffer refills (at
 /// 921,600 baud about 47 arrive in the 512 us of a half).
 const FEED_CHUNK: usize = 256;
-/// Rows of subgrids contoured between two half-buffer refills while a
-/// completed slice has work pending (one row of a 128-wide slice is some
-/// 15,000 instructions); more while the output waits for a free half.
-const CONTOUR_ROWS: usize = 1;
+/// Core cycles spent contouring between two half-buffer refills while a
+/// completed slice has work pending, in whole rows (a row of a 128-wide
+/// slice is some 15,000 instructions; one more row may start just before
+/// the budget runs out); more while the output waits for a free half.
+const CONTOUR_CYCLES: u32 = 6_000;
 
 #[entry]
 fn main() -> ! {
@@ -174,7 +175,7 @@ fn serve(link: &mut Link<'_, '_>, rx: &mut Rx, inbox: &mut Inbox, tx: &mut Tx, t
         let receiving = link.state() == DeviceState::Receiving;
         let t0 = clock::cycles();
         if busy {
-            link.contour(CONTOUR_ROWS);
+            link.contour_while(|_| clock::cycles().wrapping_sub(t0) < CONTOUR_CYCLES);
         } else {
             let n = link.feed(inbox.bytes(rx), clock::now_ms());
             inbox.consume(n);

@@ -760,11 +760,20 @@ impl Link<'_, '_> {
         self.dev.stream.busy()
     }
 
-    /// Contour up to `rows` rows of subgrids of the slice completed last
-    /// (a row is one row of cells of one plane: `nx - 1` of them; a slice
-    /// of `n x n` owes about `3 n`). Returns whether some are left.
-    pub fn contour(&mut self, rows: usize) -> bool {
-        self.dev.stream.work(self.back, rows)
+    /// Contour whole rows of subgrids of the slice completed last, at
+    /// least one and until about `cells` cells are done (a row is one row
+    /// of cells of one plane, `nx - 1` or `ny - 1` of them; a slice of
+    /// `n x n` owes about `3 n` rows). Returns whether some are left.
+    pub fn contour(&mut self, cells: usize) -> bool {
+        self.dev.stream.work(self.back, cells)
+    }
+
+    /// As [`Link::contour`], one whole row and then more while
+    /// `more(cells done so far)` says so: for a time budget, as the firmware
+    /// keeps one (making the contourer for a call costs about as much as a
+    /// short row, so a call should do more than one when it can).
+    pub fn contour_while(&mut self, more: impl FnMut(usize) -> bool) -> bool {
+        self.dev.stream.work_while(self.back, more)
     }
 
     /// Move answer bytes for the UART into `out`; returns how many.

@@ -10,7 +10,7 @@
 //!
 //! That work is a [`Job`] of rows of subgrids (about `3 n` for an `n x n`
 //! slice), done at once when the slice completes or, deferred, a few rows
-//! at a time ([`Stream::work`]) so that the caller can keep its display
+//! at a time ([`Stream::work`], by cells) so that the caller can keep its display
 //! refreshed in between; the next slice's data then waits for the job
 //! (the caller stops feeding), or finishes it first if it comes anyway.
 
@@ -246,17 +246,38 @@ impl<'a> Stream<'a> {
         while self.work(geometry, usize::MAX) {}
     }
 
-    /// Contour up to `rows` rows of subgrids of the pending job into
-    /// `geometry`. Returns whether some are left.
-    pub(crate) fn work(&mut self, geometry: &mut Geometry<'_>, rows: usize) -> bool {
+    /// Contour whole rows of subgrids of the pending job into `geometry`,
+    /// at least one and until `cells` cells are done. Returns whether some
+    /// are left.
+    pub(crate) fn work(&mut self, geometry: &mut Geometry<'_>, cells: usize) -> bool {
+        self.work_while(geometry, |done| done < cells)
+    }
+
+    /// Contour whole rows of subgrids of the pending job into `geometry`:
+    /// one, then more while `more(cells done)` says so. Returns whether
+    /// some are left.
+    pub(crate) fn work_while(
+        &mut self,
+        geometry: &mut Geometry<'_>,
+        mut more: impl FnMut(usize) -> bool,
+    ) -> bool {
         let Some(mut t) = self.transfer else { return false };
         let Some(mut job) = t.job else { return false };
         let mut stats = ContourStats::default();
         let mut left = true;
         if let Ok(mut rc) = RowContourer::new::<Infallible>(t.spec.levels.as_slice(), Traversal::Corrected) {
-            for _ in 0..rows {
-                if !self.row(&t.spec, &mut job, &mut rc, geometry, &mut stats) {
-                    left = false;
+            // (Making the contourer clears its 2 KB of scratch: a short row
+            // should not pay that alone.)
+            let mut done = 0usize;
+            loop {
+                match self.row(&t.spec, &mut job, &mut rc, geometry, &mut stats) {
+                    Some(n) => done = done.saturating_add(n),
+                    None => {
+                        left = false;
+                        break;
+                    }
+                }
+                if !more(done) {
                     break;
                 }
             }
@@ -270,7 +291,7 @@ impl<'a> Stream<'a> {
     }
 
     /// Contour the next row of `job` (see [`Phase`]) and move past it;
-    /// `false` when it has none left.
+    /// returns its cells, or `None` when it has none left.
     fn row(
         &mut self,
         spec: &VolumeSpec,
@@ -278,7 +299,7 @@ impl<'a> Stream<'a> {
         rc: &mut RowContourer<'_>,
         geometry: &mut Geometry<'_>,
         stats: &mut ContourStats,
-    ) -> bool {
+    ) -> Option<usize> {
         let [nx, ny] = [usize::from(spec.dims[0]), usize::from(spec.dims[1])];
         let every = usize::from(spec.every.max(1));
         // Past the phases that are done or have nothing to do.
@@ -296,7 +317,7 @@ impl<'a> Stream<'a> {
             job.phase = match job.phase {
                 Phase::Xy => Phase::Xz,
                 Phase::Xz => Phase::Yz,
-                Phase::Yz => return false,
+                Phase::Yz => return None,
             };
         }
         let at = job.next as usize;
@@ -307,7 +328,7 @@ impl<'a> Stream<'a> {
         let [r0, r1] = &mut self.rows;
         let n = if job.phase == Phase::Yz { ny } else { nx };
         let (Some(l), Some(h)) = (r0.get_mut(..n), r1.get_mut(..n)) else {
-            return false;
+            return None;
         };
         let mut sink = Keep(geometry);
         let below = usize::from(job.z.saturating_sub(1));
@@ -337,7 +358,7 @@ impl<'a> Stream<'a> {
                 job.next += every as u32;
             }
         }
-        true
+        Some(n.saturating_sub(1).max(1))
     }
 }
 
