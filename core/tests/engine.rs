@@ -907,3 +907,59 @@ fn a_transfer_that_stops_mid_job_times_out_and_keeps_the_picture() {
     e.update(10_001);
     assert_eq!(picture(&e), before);
 }
+
+#[test]
+fn contour_while_does_one_whole_row_a_call_when_told_to_stop() {
+    let n = 9usize;
+    let v = Vol::demo(Demo::Gyroid, n, SampleType::U8);
+    let mut mem = big();
+    let mut e = deferring(&mut mem);
+    let mut host = Host::new();
+    let mut bytes = Host::hello();
+    bytes.extend(host.begin(&v));
+    bytes.extend(host.slices(&v, MAX_CHUNK).concat());
+    bytes.extend(host.end());
+    let (mut link, _) = e.split();
+    let mut rest = &bytes[..];
+    let mut calls_per_slice = Vec::new();
+    while !rest.is_empty() {
+        let mut calls = 0;
+        let mut cells = Vec::new();
+        while link.busy() {
+            link.contour_while(|done| {
+                cells.push(done);
+                false
+            });
+            calls += 1;
+        }
+        if calls > 0 {
+            calls_per_slice.push(calls);
+            // Every call did exactly one row: n - 1 cells.
+            assert!(cells.iter().all(|&c| c == n - 1), "{cells:?}");
+        }
+        let k = link.feed(rest, 0);
+        rest = &rest[k..];
+    }
+    // Slice 0 owes its x-y rows; every later slice those and one row of
+    // every x-z and y-z slice.
+    let mut want = vec![n - 1];
+    want.extend(std::iter::repeat_n(3 * n - 1, n - 1));
+    assert_eq!(calls_per_slice, want);
+    // A budget in cells: whole rows until it is reached.
+    let mut e2_mem = big();
+    let mut e2 = deferring(&mut e2_mem);
+    let (mut link, _) = e2.split();
+    let mut rest = &bytes[..];
+    let mut calls = 0;
+    while !rest.is_empty() {
+        while link.busy() {
+            link.contour(2 * (n - 1) + 1);
+            calls += 1;
+        }
+        let k = link.feed(rest, 0);
+        rest = &rest[k..];
+    }
+    // Three rows a call (the third passes 2 (n - 1) + 1 cells).
+    let rows: usize = want.iter().sum();
+    assert_eq!(calls, want.iter().map(|r| r.div_ceil(3)).sum::<usize>(), "{rows} rows");
+}

@@ -225,7 +225,8 @@ impl<'a> Stream<'a> {
         if let Some(t) = self.transfer.as_mut() {
             t.last_ms = now_ms;
             if complete {
-                t.job = Some(Job { z: t.z, slot: self.cur, phase: Phase::Xy, next: 0 });
+                let mut job = Job { z: t.z, slot: self.cur, phase: Phase::Xy, next: 0 };
+                t.job = Self::ahead(&t.spec, &mut job).then_some(job);
                 t.z += 1;
                 t.offset = 0;
             } else {
@@ -277,6 +278,11 @@ impl<'a> Stream<'a> {
                         break;
                     }
                 }
+                // Done as soon as the last row is: no empty call after it.
+                if !Self::ahead(&t.spec, &mut job) {
+                    left = false;
+                    break;
+                }
                 if !more(done) {
                     break;
                 }
@@ -290,6 +296,30 @@ impl<'a> Stream<'a> {
         left
     }
 
+    /// Move `job` past the phases that are done or have nothing to do;
+    /// whether a row is left.
+    fn ahead(spec: &VolumeSpec, job: &mut Job) -> bool {
+        let [nx, ny] = [usize::from(spec.dims[0]), usize::from(spec.dims[1])];
+        let every = usize::from(spec.every.max(1));
+        loop {
+            let at = job.next as usize;
+            let done = match job.phase {
+                Phase::Xy => spec.axes & AXIS_Z == 0 || usize::from(job.z) % every != 0 || at + 1 >= ny,
+                Phase::Xz => job.z == 0 || spec.axes & AXIS_Y == 0 || at >= ny,
+                Phase::Yz => job.z == 0 || spec.axes & AXIS_X == 0 || at >= nx,
+            };
+            if !done {
+                return true;
+            }
+            job.next = 0;
+            job.phase = match job.phase {
+                Phase::Xy => Phase::Xz,
+                Phase::Xz => Phase::Yz,
+                Phase::Yz => return false,
+            };
+        }
+    }
+
     /// Contour the next row of `job` (see [`Phase`]) and move past it;
     /// returns its cells, or `None` when it has none left.
     fn row(
@@ -300,26 +330,11 @@ impl<'a> Stream<'a> {
         geometry: &mut Geometry<'_>,
         stats: &mut ContourStats,
     ) -> Option<usize> {
+        if !Self::ahead(spec, job) {
+            return None;
+        }
         let [nx, ny] = [usize::from(spec.dims[0]), usize::from(spec.dims[1])];
         let every = usize::from(spec.every.max(1));
-        // Past the phases that are done or have nothing to do.
-        loop {
-            let at = job.next as usize;
-            let done = match job.phase {
-                Phase::Xy => spec.axes & AXIS_Z == 0 || usize::from(job.z) % every != 0 || at + 1 >= ny,
-                Phase::Xz => job.z == 0 || spec.axes & AXIS_Y == 0 || at >= ny,
-                Phase::Yz => job.z == 0 || spec.axes & AXIS_X == 0 || at >= nx,
-            };
-            if !done {
-                break;
-            }
-            job.next = 0;
-            job.phase = match job.phase {
-                Phase::Xy => Phase::Xz,
-                Phase::Xz => Phase::Yz,
-                Phase::Yz => return None,
-            };
-        }
         let at = job.next as usize;
         let ty = spec.sample_type;
         let half = self.slots.len() / 2;
