@@ -167,8 +167,8 @@ impl Inbox {
     }
 }
 
-/// Between two half-buffer refills: a row of the pending contouring, or
-/// feed what arrived; send the answers.
+/// Between two half-buffer refills: rows of the pending contouring (for
+/// [`CONTOUR_CYCLES`]), or feed what arrived; send the answers.
 fn serve(link: &mut Link<'_, '_>, rx: &mut Rx, inbox: &mut Inbox, tx: &mut Tx, timing: &mut Timing) {
     let busy = link.busy();
     if busy || !inbox.bytes(rx).is_empty() {
@@ -195,9 +195,9 @@ fn serve(link: &mut Link<'_, '_>, rx: &mut Rx, inbox: &mut Inbox, tx: &mut Tx, t
 /// cycles.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, defmt::Format)]
 struct Timing {
-    /// One `Link::feed` or `Link::contour` call.
+    /// One `Link::feed` or `Link::contour_while` call.
     feed: u32,
-    /// The `Link::feed` and `Link::contour` calls of the last volume
+    /// The `Link::feed` and `Link::contour_while` calls of the last volume
     /// received, from the one that began it to the one that ended it:
     /// decoding and contouring.
     volume_feed: u64,
