@@ -322,7 +322,8 @@ fn run(board: board::Board, engine: &mut Engine<'static>) -> ! {
             }
             serve(&mut link, &mut rx, &mut inbox, &mut tx, &mut timing);
             // While the DMA still plays both halves, more of a slice's
-            // contouring (a row at a time, so the refill is not late).
+            // contouring (whole rows for a short budget a call, so the
+            // refill is not late).
             while link.busy() && !out.ready() {
                 serve(&mut link, &mut rx, &mut inbox, &mut tx, &mut timing);
             }

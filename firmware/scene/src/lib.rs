@@ -59,7 +59,7 @@ pub const FIRMWARE_VERSION: [u8; 3] = [0, 1, 0];
 /// The engine's settings: the core's defaults (view, beam, passes, the
 /// 5 s transfer timeout), the firmware's version and sample rate, and
 /// contouring deferred ([`EngineConfig::defer_contouring`]: the main loop
-/// contours a completed slice a row at a time between DMA refills, so the
+/// contours a completed slice a few rows at a time between DMA refills, so the
 /// display keeps refreshing). The simulator's virtual board (`isoscope-sim
 /// device`) uses the same defaults but contours at once, which gives the
 /// same surface: both draw the same samples for the same volume.
