@@ -65,7 +65,9 @@
 //! (its second `-serial`) and SysTick (at 168 MHz, as the board).
 
 use crate::serial::{self, Rx, Tx};
-use isoscope_core::dac::{Beam, Dac, Sample, Samples};
+use core::cell::UnsafeCell;
+use core::sync::atomic::{Ordering, compiler_fence};
+use isoscope_core::dac::{Beam, Dac, Sample, SampleSource, Samples};
 use stm32f4xx_hal::gpio::{Alternate, Analog, Output, PinState, PushPull, gpioa, gpiob};
 use stm32f4xx_hal::pac;
 use stm32f4xx_hal::prelude::*;
@@ -361,71 +363,101 @@ pub use cpu::Streaming;
 #[cfg(not(feature = "qemu"))]
 pub use dma::Streaming;
 
+/// A double buffer of `T`s in the DMA path's format: the CPU writes one
+/// half while the DMA (on the board) reads the other.
+#[repr(C, align(4))]
+struct DmaBuf<T>(UnsafeCell<[T; 2 * HALF]>);
+
+// SAFETY: accessed only through raw pointers, by [`write_slots`] and the
+// DMA set-up (one `Streaming`), on halves the DMA is not reading.
+unsafe impl<T> Sync for DmaBuf<T> {}
+
+/// DHR12RD words (4 KB).
+static XY: DmaBuf<u32> = DmaBuf(UnsafeCell::new([0; 2 * HALF]));
+/// GPIOB ODR low bytes (1 KB).
+static BLANK: DmaBuf<u8> = DmaBuf(UnsafeCell::new([0; 2 * HALF]));
+
+/// Write samples into slots `start..end` of both buffers (at most to the
+/// end of the buffers) until they are full or `samples` ends: sample `j`'s
+/// position at slot `j` of the X/Y buffer, the beam of sample `j - 1` at
+/// slot `j` of the blank buffer (`last` carries the beam from one call to
+/// the next). `also` sees each sample written. Returns the next slot. The
+/// caller makes sure the DMA is not reading those slots.
+fn write_slots(
+    samples: &mut impl SampleSource,
+    start: usize,
+    end: usize,
+    last: &mut Beam,
+    mut also: impl FnMut(Sample),
+) -> usize {
+    let end = end.min(2 * HALF);
+    let xy = XY.0.get().cast::<u32>();
+    let blank = BLANK.0.get().cast::<u8>();
+    let mut slot = start;
+    let mut prev = *last;
+    samples.fill_with(end.saturating_sub(start), |s| {
+        if slot < end {
+            // SAFETY: `slot < end <= 2 * HALF`; the DMA is not reading
+            // these slots (the caller's word).
+            unsafe {
+                xy.add(slot).write_volatile(dac_word(s));
+                blank.add(slot).write_volatile(blank_byte(prev));
+            }
+            prev = s.beam;
+            slot += 1;
+        }
+        also(s);
+    });
+    *last = prev;
+    compiler_fence(Ordering::SeqCst);
+    slot
+}
+
 #[cfg(feature = "qemu")]
 mod cpu {
     //! The output under QEMU: the same API as the DMA path, without a
     //! sample clock. Halves are handed out at once. Every sample is written
-    //! to a RAM half buffer in the DMA path's format (so that QEMU's
-    //! instruction counts are the board's refill work); while recording, the
-    //! CPU also writes it to the DAC and the blank pin.
+    //! to the first half of the buffers as the DMA path writes them
+    //! ([`super::write_slots`]: QEMU's instruction counts are the board's
+    //! refill work); while recording, the CPU also writes it to the DAC and
+    //! the blank pin.
 
-    use super::{DmaError, Filled, HALF, Out, blank_byte, dac_word};
-    use core::cell::UnsafeCell;
+    use super::{DmaError, Filled, HALF, Out, write_slots};
     use isoscope_core::dac::{Beam, SampleSource, Samples};
-
-    /// A half buffer of `T`s, as the DMA path's.
-    struct HalfBuf<T>(UnsafeCell<[T; HALF]>);
-
-    // SAFETY: accessed only by `Streaming` (one instance), through raw
-    // pointers.
-    unsafe impl<T> Sync for HalfBuf<T> {}
-
-    static XY: HalfBuf<u32> = HalfBuf(UnsafeCell::new([0; HALF]));
-    static BLANK: HalfBuf<u8> = HalfBuf(UnsafeCell::new([0; HALF]));
 
     /// The running output.
     pub struct Streaming {
         out: Out,
         /// The next slot of the current half.
         slot: usize,
+        /// The beam of the last sample written.
+        last_beam: Beam,
         recording: bool,
     }
 
     impl Out {
         /// Start the output (not recording).
         pub fn start(self) -> Streaming {
-            Streaming { out: self, slot: 0, recording: false }
+            Streaming { out: self, slot: 0, last_beam: Beam::Off, recording: false }
         }
     }
 
     impl Streaming {
         /// As the DMA path's: fill the current half from `samples`.
         pub fn fill_from(&mut self, samples: &mut impl SampleSource) -> Result<Filled, DmaError> {
-            let (out, recording) = (&mut self.out, self.recording);
-            let room = HALF - self.slot;
-            let xy = XY.0.get().cast::<u32>();
-            let blank = BLANK.0.get().cast::<u8>();
-            let mut slot = self.slot;
-            let mut last = Beam::Off;
-            let n = samples.fill_with(room, |s| {
-                if slot < HALF {
-                    // SAFETY: `slot < HALF`.
-                    unsafe {
-                        xy.add(slot).write_volatile(dac_word(s));
-                        blank.add(slot).write_volatile(blank_byte(last));
-                    }
-                    last = s.beam;
-                    slot += 1;
-                }
+            let Self { out, slot, last_beam, recording } = self;
+            let recording = *recording;
+            // SAFETY of the writes: nothing reads the buffers under QEMU.
+            let next = write_slots(samples, *slot, HALF, last_beam, |s| {
                 if recording {
                     out.write(s);
                 }
             });
-            if n < room {
-                self.slot += n;
+            if next < HALF {
+                *slot = next;
                 return Ok(Filled::FrameEnd);
             }
-            self.slot = 0;
+            *slot = 0;
             Ok(Filled::Half)
         }
 
@@ -472,27 +504,12 @@ mod dma {
     //! The DMA output path (see the module docs of `board`).
 
     use super::{
-        DAC_CH2, DAC_DMAEN1, DAC_EN1, DAC_TEN1, DAC_TSEL1_TIM8, DmaError, Filled, HALF, Out, SAMPLE_RATE_HZ,
-        blank_byte, dac_word, pac,
+        BLANK, DAC_CH2, DAC_DMAEN1, DAC_EN1, DAC_TEN1, DAC_TSEL1_TIM8, DmaError, Filled, HALF, Out,
+        SAMPLE_RATE_HZ, XY, pac, write_slots,
     };
-    use core::cell::UnsafeCell;
-    use core::sync::atomic::{AtomicU8, AtomicU32, Ordering, compiler_fence};
+    use core::sync::atomic::{AtomicU8, AtomicU32, Ordering};
     use isoscope_core::dac::{Beam, SampleSource, Samples};
     use stm32f4xx_hal::interrupt;
-
-    /// A DMA buffer of `T`s: the CPU writes one half while the DMA reads
-    /// the other.
-    #[repr(C, align(4))]
-    struct DmaBuf<T>(UnsafeCell<[T; 2 * HALF]>);
-
-    // SAFETY: accessed only through raw pointers, by `Streaming` (one
-    // instance) on halves the DMA is not reading.
-    unsafe impl<T> Sync for DmaBuf<T> {}
-
-    /// DHR12RD words (4 KB).
-    static XY: DmaBuf<u32> = DmaBuf(UnsafeCell::new([0; 2 * HALF]));
-    /// GPIOB ODR low bytes (1 KB).
-    static BLANK: DmaBuf<u8> = DmaBuf(UnsafeCell::new([0; 2 * HALF]));
 
     /// Halves the DMA has finished with (bit 0: first, bit 1: second), set
     /// by the interrupt, cleared by the main loop as it refills them.
@@ -545,31 +562,12 @@ mod dma {
 
     impl Streaming {
         /// Write samples into half `half` of both buffers from slot `from`
-        /// until the half is full or `samples` ends: sample `j`'s position
-        /// at slot `j` of the X/Y buffer, the beam of sample `j - 1` at slot
-        /// `j` of the blank buffer. Returns the next slot.
+        /// until the half is full or `samples` ends ([`write_slots`]).
+        /// Returns the next slot of the half.
         fn write(&mut self, half: usize, from: usize, samples: &mut impl SampleSource) -> usize {
-            let xy = XY.0.get().cast::<u32>();
-            let blank = BLANK.0.get().cast::<u8>();
-            let start = half * HALF + from;
-            let end = (half + 1) * HALF;
-            let mut slot = start;
-            let mut last = self.last_beam;
-            samples.fill_with(end.saturating_sub(start), |s| {
-                if slot < end {
-                    // SAFETY: `slot < end <= 2 * HALF`; the DMA is not
-                    // reading this half.
-                    unsafe {
-                        xy.add(slot).write_volatile(dac_word(s));
-                        blank.add(slot).write_volatile(blank_byte(last));
-                    }
-                    last = s.beam;
-                    slot += 1;
-                }
-            });
-            self.last_beam = last;
-            compiler_fence(Ordering::SeqCst);
-            slot - half * HALF
+            // The DMA is not reading this half.
+            write_slots(samples, half * HALF + from, (half + 1) * HALF, &mut self.last_beam, |_| ())
+                - half * HALF
         }
 
         /// Fill the open half from `samples`, waiting for the DMA to free a
