@@ -18,21 +18,19 @@
 use criterion::{Criterion, Throughput, black_box, criterion_group, criterion_main};
 use isoscope_core::dac::Sample;
 use isoscope_core::demo::Demo;
-use isoscope_core::engine::{Buffers, Engine, EngineConfig, Packed};
+use isoscope_core::engine::{Engine, EngineConfig, StaticBuffers};
 use isoscope_core::wire::{AXIS_X, AXIS_Y, AXIS_Z, Levels, MAX_CHUNK, Message, SampleType, encode};
 
 const SIDE: usize = 16;
-/// The firmware's capacities.
-const POINTS: usize = 8192;
-const SLICE_BYTES: usize = 32 * 1024;
 /// Samples per DMA half in the firmware.
 const HALF: usize = 512;
 
-struct Mem {
-    slices: Vec<u8>,
-    rows: Vec<f32>,
-    points: Vec<Packed>,
-    kinds: Vec<u8>,
+/// The firmware's engine memory: 32 KB slices, 128-sample rows, 8192
+/// points a surface.
+type Mem = StaticBuffers<{ 32 * 1024 }, 128, 8192, 2048>;
+
+fn engine(mem: &mut Mem) -> Engine<'_> {
+    Engine::new(EngineConfig::default(), mem.buffers()).expect("engine")
 }
 
 fn feed_demo(engine: &mut Engine<'_>, side: usize) {
@@ -72,33 +70,16 @@ fn feed_demo(engine: &mut Engine<'_>, side: usize) {
     assert!(engine.update(0), "the volume makes a picture");
 }
 
-impl Mem {
-    fn new() -> Self {
-        Self {
-            slices: vec![0; 2 * SLICE_BYTES],
-            rows: vec![0.0; 2 * 128],
-            points: vec![[0; 3]; 2 * POINTS],
-            kinds: vec![0; 2 * POINTS.div_ceil(4)],
-        }
-    }
-
-    fn engine(&mut self) -> Engine<'_> {
-        let buffers =
-            Buffers::halves(&mut self.slices, &mut self.rows, &mut self.points, &mut self.kinds, &mut []);
-        Engine::new(EngineConfig::default(), buffers).expect("engine")
-    }
-}
-
 /// Receiving a volume: decoding, streaming contouring, then the commit
 /// (stitching and ordering) in `update`.
 fn volume(c: &mut Criterion) {
-    let mut mem = Mem::new();
+    let mut mem = Box::new(Mem::new());
     let mut g = c.benchmark_group("volume");
     g.sample_size(20);
     for side in [16, 24] {
         g.bench_function(format!("hydrogen{side}"), |b| {
             b.iter(|| {
-                let mut engine = mem.engine();
+                let mut engine = engine(&mut mem);
                 feed_demo(&mut engine, side);
                 black_box(engine.counters().volumes)
             })
@@ -108,8 +89,8 @@ fn volume(c: &mut Criterion) {
 }
 
 fn frame(c: &mut Criterion) {
-    let mut mem = Mem::new();
-    let mut engine = mem.engine();
+    let mut mem = Box::new(Mem::new());
+    let mut engine = engine(&mut mem);
     feed_demo(&mut engine, SIDE);
     let (_, screen) = engine.split();
     let samples = screen.frame().count() as u64;

@@ -154,36 +154,6 @@ pub fn reference_precheck(frame: &[u8]) -> Result<(), WireError> {
 }
 
 /// Engine memory for the `engine` target: slices of 1 KB, rows of 32, 4096
-/// points in each surface.
-pub struct EngineMem {
-    slices: Vec<u8>,
-    rows: Vec<f32>,
-    points: Vec<isoscope_core::engine::Packed>,
-    kinds: Vec<u8>,
-}
-
-impl EngineMem {
-    /// Zeroed memory.
-    pub fn new() -> Self {
-        const P: usize = 4096;
-        Self { slices: vec![0; 2048], rows: vec![0.0; 64], points: vec![[0; 3]; 2 * P], kinds: vec![0; 2 * P / 4] }
-    }
-
-    /// The memory, lent to an engine (no extra scratch: the slices are it,
-    /// as on the MCU).
-    pub fn buffers(&mut self) -> isoscope_core::engine::Buffers<'_> {
-        isoscope_core::engine::Buffers::halves(
-            &mut self.slices,
-            &mut self.rows,
-            &mut self.points,
-            &mut self.kinds,
-            &mut [],
-        )
-    }
-}
-
-impl Default for EngineMem {
-    fn default() -> Self {
-        Self::new()
-    }
-}
+/// points in each surface (no extra scratch: the slices are it, as on the
+/// MCU).
+pub type EngineMem = isoscope_core::engine::StaticBuffers<1024, 32, 4096, 1024>;
