@@ -765,15 +765,6 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
         (c(p.x), c(p.y))
     }
 
-    fn emit(&mut self, (x, y): (u16, u16), beam: Beam) -> Sample {
-        self.lit = beam == Beam::On;
-        self.stats.samples += 1;
-        if self.lit {
-            self.stats.lit_samples += 1;
-        }
-        Sample::new(x, y, beam)
-    }
-
     /// Pop the lookahead and refill it.
     fn take(&mut self) -> Option<Step> {
         let step = self.ahead.take();
@@ -879,20 +870,11 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
 }
 
 impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
-    /// Advance the current plan by one lit step (`step < steps`) and
-    /// return its code: the plan's target for the last step.
-    #[inline(always)]
-    fn lit_step(plan: &mut Plan) -> (u16, u16) {
-        plan.step += 1;
-        let n = plan.steps as i32; // at most the cap, an i32
-        let (x, y) = (plan.x.step(n), plan.y.step(n));
-        if plan.step == plan.steps { plan.code } else { (x, y) }
-    }
-
     /// The next samples of the frame, handed to `put` one by one, at most
     /// `max` of them; returns how many. Fewer than `max` only when the frame
     /// has ended. The same samples, statistics and state as taking them
-    /// from the iterator one [`next`](Iterator::next) at a time, which one
+    /// from the iterator one [`next`](Iterator::next) at a time (which is
+    /// this for one), which one
     /// may mix with this; but a run of repeated samples (a jump's settle, a
     /// dwell) or a segment's steps costs one loop here, not a state machine
     /// round per sample. The firmware refills its DMA halves this way.
@@ -1000,25 +982,11 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
 impl<I: Iterator<Item = Command<ScreenPoint>>> Iterator for Scheduler<I> {
     type Item = Sample;
 
+    /// One sample: [`Scheduler::fill_with`] for one.
     fn next(&mut self) -> Option<Sample> {
-        loop {
-            let plan = &mut self.plan;
-            if plan.blank > 0 {
-                plan.blank -= 1;
-                let code = plan.code;
-                return Some(self.emit(code, Beam::Off));
-            }
-            if plan.step < plan.steps {
-                let code = Self::lit_step(plan);
-                return Some(self.emit(code, Beam::On));
-            }
-            if plan.lit > 0 {
-                plan.lit -= 1;
-                let code = plan.code;
-                return Some(self.emit(code, Beam::On));
-            }
-            self.plan = self.next_plan()?;
-        }
+        let mut out = None;
+        self.fill_with(1, |s| out = Some(s));
+        out
     }
 
     fn size_hint(&self) -> (usize, Option<usize>) {
