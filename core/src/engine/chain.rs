@@ -113,6 +113,23 @@ fn dist2(a: Packed, b: Packed) -> u64 {
         .sum()
 }
 
+/// [`dist2`] as an `f32` (rounded to nearest): by way of `u32` when it
+/// fits, which the FPU converts (a `u64` takes a software call on the MCU).
+#[inline]
+fn dist2f(a: Packed, b: Packed) -> f32 {
+    let s = dist2(a, b);
+    match u32::try_from(s) {
+        Ok(s) => s as f32,
+        Err(_) => s as f32,
+    }
+}
+
+/// The distance from `a` to `b`, in codes.
+#[inline]
+fn length(a: Packed, b: Packed) -> f32 {
+    sqrt(dist2f(a, b))
+}
+
 /// Cell coordinates of `q` in a grid of `n` cells of `2^bits` codes.
 fn cell_coords(q: Packed, n: [u32; 3], bits: u32) -> [u32; 3] {
     let [x, y, z] = q;
@@ -164,7 +181,7 @@ impl<'s, 'g, 'a> Index<'s, 'g, 'a> {
         // fragments, the links and the tour: two ends a fragment, or every
         // point of the loops.
         let ends = if any_vertex { points } else { 2 * frags };
-        let tour = if any_vertex { 2 * frags } else { 0 };
+        let tour = if any_vertex { TOUR_WORDS * frags } else { 0 };
         let spare = words.saturating_sub(frags + points + tour) as u64;
         let budget = spare.min((ends as u64 * 2).max(1)).max(1);
         let cells_at = |b: u32| -> u64 { top.iter().map(|&t| u64::from((u32::from(t) >> b) + 1)).product() };
@@ -176,8 +193,8 @@ impl<'s, 'g, 'a> Index<'s, 'g, 'a> {
         let heads = frags;
         let cells = n.iter().map(|&c| c as usize).product::<usize>();
         let links = heads + cells;
-        // The order pass keeps its tour (fragment and entry point, two
-        // words a fragment) after the links.
+        // The order pass keeps its tour ([`TOUR_WORDS`] a fragment) after
+        // the links.
         if links + points + tour > words {
             return None;
         }
@@ -485,13 +502,14 @@ pub(crate) fn chain(
                 let Some(end) = x.nearest(cur).or_else(|| x.first_from(&mut scan)) else { break };
                 let f = x.frag_of(end);
                 x.take(f);
-                tour.push(&mut x.w, f, end);
-                cur = exit(&x, f, end);
+                tour.push(&mut x, f, end);
+                cur = x.point(exit(&x, f, end));
             }
             tour.two_opt(&mut x);
             tour.best_entries(&mut x, start);
             for k in 0..tour.len {
-                let (f, end) = tour.get(&x.w, k);
+                let (end, _) = tour.get(&x.w, k);
+                let f = x.frag_of(end);
                 walk.emit(&x, dst, f, end, &mut stats);
             }
         }
@@ -538,68 +556,86 @@ fn copy(src: &Geometry<'_>, dst: &mut Geometry<'_>, stats: &mut ChainStats) {
     stats.points_out = dst.len() as u32;
 }
 
-/// Where the beam leaves fragment `f` entered at point `end`.
-fn exit(x: &Index<'_, '_, '_>, f: usize, end: usize) -> Packed {
+/// The point where the beam leaves fragment `f` entered at point `end`.
+fn exit(x: &Index<'_, '_, '_>, f: usize, end: usize) -> usize {
     let (from, to) = x.span(f);
     if x.is_loop(f) {
-        x.point(end)
+        end
     } else if end == from {
-        x.point(to - 1)
+        to - 1
     } else {
-        x.point(from)
+        from
     }
 }
 
-/// The order pass's tour: per step, a fragment and the point it is entered
-/// at, in two words after the index's links.
+/// The order pass's tour, in [`TOUR_WORDS`] words a step after the index's
+/// links: the point a fragment is entered at, the point it is left at (the
+/// same for a loop or a dot) and the length of the jump to the next step
+/// (an `f32`'s bits, kept by [`Tour::two_opt`]).
 struct Tour {
     base: usize,
     len: usize,
 }
 
+/// Words a tour step takes.
+const TOUR_WORDS: usize = 3;
+
 impl Tour {
-    fn push(&mut self, w: &mut Words<'_>, f: usize, end: usize) {
-        w.set(self.base + 2 * self.len, f as u32);
-        w.set(self.base + 2 * self.len + 1, end as u32);
+    fn push(&mut self, x: &mut Index<'_, '_, '_>, f: usize, end: usize) {
+        let out = exit(x, f, end);
+        self.set(&mut x.w, self.len, end, out);
         self.len += 1;
     }
 
+    /// Step `k`'s entry and exit point indices.
     fn get(&self, w: &Words<'_>, k: usize) -> (usize, usize) {
-        (w.get(self.base + 2 * k) as usize, w.get(self.base + 2 * k + 1) as usize)
+        let at = self.base + TOUR_WORDS * k;
+        (w.get(at) as usize, w.get(at + 1) as usize)
     }
 
-    fn set(&self, w: &mut Words<'_>, k: usize, f: usize, end: usize) {
-        w.set(self.base + 2 * k, f as u32);
-        w.set(self.base + 2 * k + 1, end as u32);
+    fn set(&self, w: &mut Words<'_>, k: usize, entry: usize, exit: usize) {
+        let at = self.base + TOUR_WORDS * k;
+        w.set(at, entry as u32);
+        w.set(at + 1, exit as u32);
     }
 
-    /// Where step `k` is entered and left (`start` before the first step).
+    fn jump(&self, w: &Words<'_>, k: usize) -> f32 {
+        f32::from_bits(w.get(self.base + TOUR_WORDS * k + 2))
+    }
+
+    fn set_jump(&self, w: &mut Words<'_>, k: usize, v: f32) {
+        w.set(self.base + TOUR_WORDS * k + 2, v.to_bits());
+    }
+
+    /// Where step `k` is entered and left.
     fn ends(&self, x: &Index<'_, '_, '_>, k: usize) -> (Packed, Packed) {
-        let (f, end) = self.get(&x.w, k);
-        (x.point(end), exit(x, f, end))
+        let (entry, exit) = self.get(&x.w, k);
+        (x.point(entry), x.point(exit))
     }
 
-    /// The other end of an open fragment (a loop and a dot keep theirs).
-    fn flipped(x: &Index<'_, '_, '_>, f: usize, end: usize) -> usize {
-        let (from, to) = x.span(f);
-        if x.is_loop(f) || from + 1 == to {
-            end
-        } else if end == from {
-            to - 1
-        } else {
-            from
-        }
+    /// Measure the jump from step `k` to step `k + 1`.
+    fn measure(&self, x: &mut Index<'_, '_, '_>, k: usize) {
+        let jump = length(self.ends(x, k).1, self.ends(x, k + 1).0);
+        self.set_jump(&mut x.w, k, jump);
     }
 
     /// 2-opt: reverse a run of up to [`WINDOW`] steps (each drawn the other
     /// way) where that shortens the two jumps at its ends; first
     /// improvement, until a pass finds none (at most 8 passes).
+    ///
+    /// The jumps' lengths are kept with the steps (and mended after a
+    /// reversal), and a candidate whose first new jump alone is surely no
+    /// shorter than the two old ones is turned down without a square root:
+    /// the same moves as measuring every jump afresh, at a fraction of the
+    /// cost.
     fn two_opt(&self, x: &mut Index<'_, '_, '_>) {
         let n = self.len;
         if n < 3 {
             return;
         }
-        let d = |a: Packed, b: Packed| sqrt(dist2(a, b) as f32);
+        for k in 0..n - 1 {
+            self.measure(x, k);
+        }
         // Bounded work: 8 passes of WINDOW moves a step.
         let mut budget: u64 = 8 * WINDOW as u64 * n as u64;
         let mut improved = true;
@@ -612,15 +648,24 @@ impl Tour {
                 // is never moved, so the jump from the start stays.
                 let out_i = self.ends(x, i).1;
                 let in_i1 = self.ends(x, i + 1).0;
-                let before = d(out_i, in_i1);
+                let before = self.jump(&x.w, i);
                 for j in i + 2..n.min(i + 2 + WINDOW) {
                     budget = budget.saturating_sub(1);
                     let out_j = self.ends(x, j).1;
+                    let old = before + if j + 1 < n { self.jump(&x.w, j) } else { 0.0 };
+                    // `length` is within 1e-6 of the true root: a first new
+                    // jump this long is no shorter than `old`, nor is `new`.
+                    if dist2f(out_i, out_j) * 0.999_99 >= old * old {
+                        continue;
+                    }
                     let after = if j + 1 < n { Some(self.ends(x, j + 1).0) } else { None };
-                    let old = before + after.map_or(0.0, |a| d(out_j, a));
-                    let new = d(out_i, out_j) + after.map_or(0.0, |a| d(in_i1, a));
+                    let new = length(out_i, out_j) + after.map_or(0.0, |a| length(in_i1, a));
                     if new + 1e-3 < old {
                         self.reverse(x, i + 1, j);
+                        self.measure(x, i);
+                        if j + 1 < n {
+                            self.measure(x, j);
+                        }
                         improved = true;
                         break;
                     }
@@ -632,21 +677,29 @@ impl Tour {
         }
     }
 
-    /// Reverse steps `a..=b`, each drawn the other way.
-    fn reverse(&self, x: &mut Index<'_, '_, '_>, mut a: usize, mut b: usize) {
-        while a < b {
-            let (fa, ea) = self.get(&x.w, a);
-            let (fb, eb) = self.get(&x.w, b);
-            let (na, nb) = (Self::flipped(x, fb, eb), Self::flipped(x, fa, ea));
-            self.set(&mut x.w, a, fb, na);
-            self.set(&mut x.w, b, fa, nb);
-            a += 1;
-            b -= 1;
+    /// Reverse steps `a..=b`, each drawn the other way (entry and exit
+    /// swapped), and the jumps between them (a length reads the same both
+    /// ways).
+    fn reverse(&self, x: &mut Index<'_, '_, '_>, a: usize, b: usize) {
+        let (mut lo, mut hi) = (a, b);
+        while lo <= hi {
+            let (ea, xa) = self.get(&x.w, lo);
+            let (eb, xb) = self.get(&x.w, hi);
+            self.set(&mut x.w, lo, xb, eb);
+            self.set(&mut x.w, hi, xa, ea);
+            lo += 1;
+            if hi == 0 {
+                break;
+            }
+            hi -= 1;
         }
-        if a == b {
-            let (f, e) = self.get(&x.w, a);
-            let n = Self::flipped(x, f, e);
-            self.set(&mut x.w, a, f, n);
+        let (mut lo, mut hi) = (a, b.saturating_sub(1));
+        while lo < hi {
+            let (ja, jb) = (self.jump(&x.w, lo), self.jump(&x.w, hi));
+            self.set_jump(&mut x.w, lo, jb);
+            self.set_jump(&mut x.w, hi, ja);
+            lo += 1;
+            hi -= 1;
         }
     }
 
@@ -654,11 +707,11 @@ impl Tour {
     fn best_entries(&self, x: &mut Index<'_, '_, '_>, start: Packed) {
         let mut prev = start;
         for k in 0..self.len {
-            let (f, end) = self.get(&x.w, k);
+            let (end, _) = self.get(&x.w, k);
+            let f = x.frag_of(end);
             if x.is_loop(f) {
                 let next = if k + 1 < self.len { Some(self.ends(x, k + 1).0) } else { None };
-                let cost =
-                    |v: Packed| sqrt(dist2(prev, v) as f32) + next.map_or(0.0, |n| sqrt(dist2(v, n) as f32));
+                let cost = |v: Packed| length(prev, v) + next.map_or(0.0, |n| length(v, n));
                 let (from, to) = x.span(f);
                 let mut best = (cost(x.point(end)), end);
                 for i in from..to {
@@ -667,7 +720,7 @@ impl Tour {
                         best = (c, i);
                     }
                 }
-                self.set(&mut x.w, k, f, best.1);
+                self.set(&mut x.w, k, best.1, best.1);
             }
             prev = self.ends(x, k).1;
         }
@@ -725,7 +778,7 @@ impl Walk {
         let first = x.point(end);
         if !(join || first == self.cur) || !self.out.open {
             self.out.finish(dst, stats);
-            stats.travel += sqrt(dist2(first, self.cur) as f32) / f32::from(1u16 << x.src.shift());
+            stats.travel += length(first, self.cur) / f32::from(1u16 << x.src.shift());
         }
         let mut emit = |i: usize| {
             let q = x.point(i);
