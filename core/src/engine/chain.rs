@@ -230,12 +230,14 @@ impl<'s, 'g, 'a> Index<'s, 'g, 'a> {
         cx + nx * (cy + ny * cz)
     }
 
+    #[inline]
     fn point(&self, i: usize) -> Packed {
-        self.src.get(i).map_or([0; 3], |(q, _)| q)
+        self.src.point_at(i).unwrap_or([0; 3])
     }
 
+    #[inline]
     fn kind(&self, i: usize) -> Kind {
-        self.src.get(i).map_or(Kind::Line, |(_, k)| k)
+        self.src.kind(i).unwrap_or(Kind::Line)
     }
 
     fn drawn(&self, f: usize) -> bool {

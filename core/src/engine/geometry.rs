@@ -160,9 +160,18 @@ impl<'a> Geometry<'a> {
         Some((p, Kind::from_bits(byte >> (2 * (i % 4)))))
     }
 
+    /// Point `i` alone (no kind: the stitcher's hot lookups).
+    #[inline]
+    pub(crate) fn point_at(&self, i: usize) -> Option<Packed> {
+        if i >= self.len {
+            return None;
+        }
+        self.points.get(i).copied()
+    }
+
     /// The kind of point `i` alone.
     #[inline]
-    fn kind(&self, i: usize) -> Option<Kind> {
+    pub(crate) fn kind(&self, i: usize) -> Option<Kind> {
         if i >= self.len {
             return None;
         }

@@ -130,16 +130,28 @@ impl CommandSink<Point3> for Keep<'_, '_> {
 /// Samples `start, start + stride, ...` of a slice of little-endian
 /// samples, widened to `f32` into all of `out` (NaN past the end).
 fn decode(ty: SampleType, bytes: &[u8], start: usize, stride: usize, out: &mut [f32]) {
-    let size = ty.size();
-    for (k, o) in out.iter_mut().enumerate() {
-        let at = (start + k * stride) * size;
-        let b = bytes.get(at..at + size).unwrap_or(&[]);
-        *o = match ty {
-            SampleType::U8 => b.first().map_or(f32::NAN, |&v| f32::from(v)),
-            SampleType::U16 => b.try_into().map_or(f32::NAN, |v| f32::from(u16::from_le_bytes(v))),
-            SampleType::I16 => b.try_into().map_or(f32::NAN, |v| f32::from(i16::from_le_bytes(v))),
-            SampleType::F32 => b.try_into().map_or(f32::NAN, f32::from_le_bytes),
-        };
+    // One loop per type (the type is not asked again per sample).
+    match ty {
+        SampleType::U8 => widen::<1>(bytes, start, stride, out, |b| f32::from(b[0])),
+        SampleType::U16 => widen::<2>(bytes, start, stride, out, |b| f32::from(u16::from_le_bytes(b))),
+        SampleType::I16 => widen::<2>(bytes, start, stride, out, |b| f32::from(i16::from_le_bytes(b))),
+        SampleType::F32 => widen::<4>(bytes, start, stride, out, f32::from_le_bytes),
+    }
+}
+
+/// [`decode`] for samples of `N` bytes.
+#[inline(always)]
+fn widen<const N: usize>(
+    bytes: &[u8],
+    start: usize,
+    stride: usize,
+    out: &mut [f32],
+    from: impl Fn([u8; N]) -> f32,
+) {
+    let samples = bytes.as_chunks::<N>().0;
+    let mut at = samples.get(start..).unwrap_or(&[]).iter().step_by(stride.max(1));
+    for o in out.iter_mut() {
+        *o = at.next().map_or(f32::NAN, |b| from(*b));
     }
 }
 
