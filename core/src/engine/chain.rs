@@ -928,6 +928,79 @@ mod tests {
         g.push(Command::LineTo(Point3::new(b[0], b[1], b[2]))).unwrap();
     }
 
+    /// 2-opt as it was before the lengths were kept: every jump measured
+    /// afresh, every candidate's two new jumps computed. The oracle of
+    /// `two_opt_keeps_lengths_without_changing_a_move`.
+    fn two_opt_afresh(tour: &Tour, x: &mut Index<'_, '_, '_>) {
+        let n = tour.len;
+        let mut budget: u64 = 8 * WINDOW as u64 * n as u64;
+        let (mut improved, mut passes) = (true, 0);
+        while n >= 3 && improved && budget > 0 && passes < 8 {
+            passes += 1;
+            improved = false;
+            for i in 0..n - 1 {
+                let out_i = tour.ends(x, i).1;
+                let in_i1 = tour.ends(x, i + 1).0;
+                let before = length(out_i, in_i1);
+                for j in i + 2..n.min(i + 2 + WINDOW) {
+                    budget = budget.saturating_sub(1);
+                    let out_j = tour.ends(x, j).1;
+                    let after = if j + 1 < n { Some(tour.ends(x, j + 1).0) } else { None };
+                    let old = before + after.map_or(0.0, |a| length(out_j, a));
+                    let new = length(out_i, out_j) + after.map_or(0.0, |a| length(in_i1, a));
+                    if new + 1e-3 < old {
+                        tour.reverse(x, i + 1, j);
+                        improved = true;
+                        break;
+                    }
+                }
+                if budget == 0 {
+                    break;
+                }
+            }
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(300))]
+        #[test]
+        fn two_opt_keeps_lengths_without_changing_a_move(
+            frags in proptest::collection::vec(
+                (proptest::collection::vec([0u16..400, 0u16..400, 0u16..40], 1..4), proptest::bool::ANY),
+                3..60,
+            ),
+        ) {
+            // Open polylines (some closed into loops, some single dots) in
+            // the order given: a poor tour, so 2-opt has moves to make.
+            let (mut p, mut k) = store(256);
+            let mut src = Geometry::new(&mut p, &mut k);
+            src.reset(0);
+            for (pts, closed) in &frags {
+                let kind = match (pts.len(), closed) {
+                    (1, _) => Kind::Dot,
+                    (_, true) => Kind::Loop,
+                    _ => Kind::Move,
+                };
+                for (n, &q) in pts.iter().enumerate() {
+                    src.push_raw(q, if n == 0 { kind } else { Kind::Line });
+                }
+            }
+            let mut tours = Vec::new();
+            for afresh in [false, true] {
+                let mut scratch = vec![0u8; 64 * 1024];
+                let mut x = Index::build(&src, &mut scratch, true).expect("room");
+                let mut tour = Tour { base: x.links + src.len(), len: 0 };
+                for f in 0..x.frags {
+                    let end = x.span(f).0;
+                    tour.push(&mut x, f, end);
+                }
+                if afresh { two_opt_afresh(&tour, &mut x) } else { tour.two_opt(&mut x) }
+                tours.push((0..tour.len).map(|k| tour.get(&x.w, k)).collect::<Vec<_>>());
+            }
+            proptest::prop_assert_eq!(&tours[0], &tours[1]);
+        }
+    }
+
     #[test]
     fn a_square_of_four_fragments_in_any_order_becomes_one_closed_loop() {
         let (mut p, mut k) = store(16);
