@@ -15,8 +15,8 @@
 //! whole ring from the main loop. QEMU's USART model offers the next byte
 //! only once the last one is read, so there a full ring holds the byte in
 //! the data register instead ([`HOLD_BACK`]): the interrupt masks itself
-//! in the NVIC and [`Rx::read`] unmasks it, and nothing is lost however long the main
-//! loop is busy. (On a board the line does not wait: a held byte would
+//! in the NVIC and [`Rx::read`] unmasks it, and nothing is lost however
+//! long the main loop is busy. (On a board the line does not wait: a held byte would
 //! overrun the next one, so there a byte that finds the ring full is
 //! dropped.)
 
