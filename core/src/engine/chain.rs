@@ -154,10 +154,16 @@ struct Index<'s, 'g, 'a> {
     frags: usize,
     /// Closed loops may be entered at any vertex.
     any_vertex: bool,
+    /// The stitch pass only ever looks up ends at exact points: its lists
+    /// are buckets of a hash of the point (this many), not cells of space,
+    /// so that the ends of a surface, a sheet through few of its box's
+    /// cells, spread over all of them. 0: the grid of cells (the order
+    /// pass, which searches around a point).
+    buckets: usize,
 }
 
 impl<'s, 'g, 'a> Index<'s, 'g, 'a> {
-    fn build(src: &'g Geometry<'a>, scratch: &'s mut [u8], any_vertex: bool) -> Option<Self> {
+    fn build(src: &'g Geometry<'a>, scratch: &'s mut [u8], any_vertex: bool, hashed: bool) -> Option<Self> {
         let mut w = Words::new(scratch);
         let points = src.len();
         let mut frags = 0usize;
@@ -191,7 +197,8 @@ impl<'s, 'g, 'a> Index<'s, 'g, 'a> {
         }
         let n = top.map(|t| (u32::from(t) >> bits) + 1);
         let heads = frags;
-        let cells = n.iter().map(|&c| c as usize).product::<usize>();
+        let buckets = if hashed { budget as usize } else { 0 };
+        let cells = if hashed { buckets } else { n.iter().map(|&c| c as usize).product::<usize>() };
         let links = heads + cells;
         // The order pass keeps its tour ([`TOUR_WORDS`] a fragment) after
         // the links.
@@ -208,7 +215,7 @@ impl<'s, 'g, 'a> Index<'s, 'g, 'a> {
         for c in 0..cells {
             w.set(heads + c, NONE);
         }
-        let mut index = Self { src, w, n, bits, heads, links, frags, any_vertex };
+        let mut index = Self { src, w, n, bits, heads, links, frags, any_vertex, buckets };
         for f in 0..frags {
             let (from, to) = index.span(f);
             for i in from..to {
@@ -221,10 +228,18 @@ impl<'s, 'g, 'a> Index<'s, 'g, 'a> {
     }
 
     fn cells(&self) -> usize {
-        self.n.iter().map(|&n| n as usize).product()
+        if self.buckets > 0 { self.buckets } else { self.n.iter().map(|&n| n as usize).product() }
     }
 
+    /// The list `q`'s ends are in: its bucket, or its cell.
+    #[inline]
     fn cell(&self, q: Packed) -> usize {
+        if self.buckets > 0 {
+            let [x, y, z] = q.map(u32::from);
+            let h = x.wrapping_mul(0x9E37_79B1) ^ y.wrapping_mul(0x85EB_CA77) ^ z.wrapping_mul(0xC2B2_AE3D);
+            // Multiply-shift onto 0..buckets (no division).
+            return ((u64::from(h) * self.buckets as u64) >> 32) as usize;
+        }
         let [cx, cy, cz] = cell_coords(q, self.n, self.bits).map(|c| c as usize);
         let [nx, ny, _] = self.n.map(|n| n as usize);
         cx + nx * (cy + ny * cz)
@@ -483,9 +498,23 @@ pub(crate) fn chain(
     tolerance: f32,
     pass: Pass,
 ) -> ChainStats {
+    chain_on(src, dst, scratch, start, tolerance, pass, pass == Pass::Stitch)
+}
+
+/// [`chain`], with the stitch pass's ends in hashed buckets or (`hashed`
+/// false, for the test that both stitch alike) in the grid of cells.
+fn chain_on(
+    src: &Geometry<'_>,
+    dst: &mut Geometry<'_>,
+    scratch: &mut [u8],
+    start: Packed,
+    tolerance: f32,
+    pass: Pass,
+    hashed: bool,
+) -> ChainStats {
     dst.reset(src.shift());
     let mut stats = ChainStats { points_in: src.len() as u32, ..ChainStats::default() };
-    let Some(mut x) = Index::build(src, scratch, pass == Pass::Order) else {
+    let Some(mut x) = Index::build(src, scratch, pass == Pass::Order, hashed && pass == Pass::Stitch) else {
         copy(src, dst, &mut stats);
         return stats;
     };
@@ -988,7 +1017,7 @@ mod tests {
             let mut tours = Vec::new();
             for afresh in [false, true] {
                 let mut scratch = vec![0u8; 64 * 1024];
-                let mut x = Index::build(&src, &mut scratch, true).expect("room");
+                let mut x = Index::build(&src, &mut scratch, true, false).expect("room");
                 let mut tour = Tour { base: x.links + src.len(), len: 0 };
                 for f in 0..x.frags {
                     let end = x.span(f).0;
@@ -998,6 +1027,44 @@ mod tests {
                 tours.push((0..tour.len).map(|k| tour.get(&x.w, k)).collect::<Vec<_>>());
             }
             proptest::prop_assert_eq!(&tours[0], &tours[1]);
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(300))]
+        #[test]
+        fn stitching_in_hashed_buckets_equals_stitching_in_cells(
+            segs in proptest::collection::vec(([0u16..6, 0u16..6, 0u16..3], [0u16..6, 0u16..6, 0u16..3], 0u8..8), 1..120),
+        ) {
+            // Segments, dots and three-point fragments on a small lattice:
+            // many ends meet, equal segments and dots on lines get culled.
+            let (mut p, mut k) = store(512);
+            let mut src = Geometry::new(&mut p, &mut k);
+            src.reset(0);
+            for &(a, b, shape) in &segs {
+                match shape {
+                    0 => { src.push_raw(a, Kind::Dot); }
+                    1 => {
+                        src.push_raw(a, Kind::Move);
+                        src.push_raw([b[0], a[1], a[2]], Kind::Line);
+                        src.push_raw(b, Kind::Line);
+                    }
+                    _ => {
+                        src.push_raw(a, Kind::Move);
+                        src.push_raw(b, Kind::Line);
+                    }
+                }
+            }
+            let mut out = Vec::new();
+            for hashed in [true, false] {
+                let (mut p2, mut k2) = store(512);
+                let mut dst = Geometry::new(&mut p2, &mut k2);
+                let mut scratch = vec![0u8; 16 * 1024];
+                let st = chain_on(&src, &mut dst, &mut scratch, [0; 3], 0.0, Pass::Stitch, hashed);
+                proptest::prop_assert!(st.ordered);
+                out.push((dst.commands().collect::<Vec<_>>(), st.polylines, st.culled_dots, st.duplicate_segments));
+            }
+            proptest::prop_assert_eq!(&out[0], &out[1]);
         }
     }
 
