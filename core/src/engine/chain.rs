@@ -463,7 +463,8 @@ impl<'s, 'g, 'a> Index<'s, 'g, 'a> {
             if to - from != 2 || a == b {
                 continue;
             }
-            loop {
+            // Each round takes a twin for good: at most `frags` rounds.
+            for _ in 0..self.frags {
                 let mut twin = None;
                 self.each_end(self.cell(a), |i| {
                     let g = self.frag_of(i);
@@ -563,8 +564,15 @@ fn chain_on(
                         continue;
                     };
                     walk.take(&mut x, dst, end, false, &mut stats);
-                    while let Some(next) = x.straightest(walk.cur, walk.prev) {
+                    // Each step takes a fragment for good: at most `frags`
+                    // of them (a bound the walk keeps even if an end were
+                    // ever left in its list).
+                    let mut steps = 0;
+                    while steps < x.frags
+                        && let Some(next) = x.straightest(walk.cur, walk.prev)
+                    {
                         walk.take(&mut x, dst, next, true, &mut stats);
+                        steps += 1;
                     }
                     walk.out.finish(dst, &mut stats);
                 }
