@@ -22,6 +22,7 @@
 //! - [`display`]: the display list: cull, stitch, merge, order.
 //! - [`beam`]: the beam scheduler (display list to DAC samples) and frame
 //!   statistics.
+//! - [`pace`]: slowing the sample clock to what the refill keeps up with.
 //! - [`dac`]: the `Dac` trait; [`mock_dac`]: a heap-free mock with ASCII
 //!   art; `spi_dac` (feature `embedded-hal`): the MCP4922.
 //! - [`engine`]: the device engine behind the UART: streaming volumes slice
@@ -82,6 +83,7 @@ pub mod engine;
 mod fastmath;
 pub mod grid;
 pub mod mock_dac;
+pub mod pace;
 pub mod pen;
 pub mod sample;
 pub mod screen;

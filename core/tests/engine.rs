@@ -361,6 +361,45 @@ fn every_command_is_answered_in_order_and_status_follows_the_end() {
     assert!(matches!(ev[2], Event::Committed { dims: [8, 8, 8], dropped: 0, .. }));
 }
 
+#[test]
+fn a_slowed_sample_clock_is_reported_in_the_refresh_rate() {
+    let v = Vol::demo(Demo::Sphere, 8, SampleType::U8);
+    let mut mem = big();
+    let mut e = engine(&mut mem);
+    let mut host = Host::new();
+    e.feed(&host.volume(&v), 0);
+    assert!(e.update(1));
+    let samples = {
+        let mut frame = e.frame();
+        frame.skip_to_end();
+        frame.stats().samples
+    };
+    let centi = |hz: u32| ((hz as f32 / samples as f32) * 100.0) as u16;
+    let status = |e: &mut Engine<'_>| {
+        answers(e);
+        e.feed(&Host::hello(), 2);
+        answers(e).into_iter().find_map(|m| match m {
+            Message::Status { refresh_centi_hz, .. } => Some(refresh_centi_hz),
+            _ => None,
+        })
+    };
+    assert_eq!(status(&mut e), Some(centi(1_000_000)));
+    // The board slowed its clock for this picture (crate::pace): the same
+    // samples, played at half the rate.
+    e.set_playback_rate(500_000);
+    assert_eq!(status(&mut e), Some(centi(500_000)));
+    assert!((e.refresh_hz() - f32::from(centi(500_000)) / 100.0).abs() < 1e-6);
+    // A new picture is counted at the rate in force.
+    e.feed(&host.volume(&Vol::demo(Demo::Torus, 10, SampleType::U8)), 3);
+    assert!(e.update(4));
+    let samples = {
+        let mut frame = e.frame();
+        frame.skip_to_end();
+        frame.stats().samples
+    };
+    assert_eq!(status(&mut e), Some(((500_000.0 / samples as f32) * 100.0) as u16));
+}
+
 /// Commit `a`, then run `bad` (frames), then check the picture is `a`'s.
 fn picture_survives(bad: impl FnOnce(&mut Engine<'_>, &mut Host, &Vol)) -> Vec<Event> {
     let a = Vol::demo(Demo::Torus, 12, SampleType::U8);

@@ -401,6 +401,10 @@ struct Device<'a> {
     /// A volume was committed: report the status once its picture is drawn.
     status_due: bool,
     display_capacity: usize,
+    /// The rate the board plays samples at ([`Engine::set_playback_rate`]).
+    playback_hz: u32,
+    /// Samples in a frame of the picture, as last counted.
+    frame_samples: u64,
     refresh_centi_hz: u16,
     tx: Deque<u8, TX_QUEUE>,
     events: Deque<Event, EVENT_QUEUE>,
@@ -516,6 +520,8 @@ impl<'a> Engine<'a> {
                 dirty: false,
                 status_due: false,
                 display_capacity,
+                playback_hz: cfg.sample_rate_hz,
+                frame_samples: 0,
                 refresh_centi_hz: 0,
                 tx: Deque::new(),
                 events: Deque::new(),
@@ -645,8 +651,8 @@ impl<'a> Engine<'a> {
     fn count(&mut self) {
         let stats = frame_stats(self.commands(), &self.dev.beam);
         let dev = &mut self.dev;
-        let fps = stats.fps(dev.cfg.sample_rate_hz as f32);
-        dev.refresh_centi_hz = (fps * 100.0).clamp(0.0, f32::from(u16::MAX)) as u16;
+        dev.frame_samples = stats.samples;
+        dev.refresh();
         let blank = stats.blank_length / stats.lit_length.max(f32::MIN_POSITIVE);
         dev.event(Event::Redrawn {
             polylines: self.front.polylines() as u32,
@@ -673,6 +679,23 @@ impl<'a> Engine<'a> {
     /// finite, and the beam scheduler skips it.
     pub fn commands(&self) -> Projected<'_> {
         Projected { commands: self.front.commands(), transform: self.transform }
+    }
+
+    /// The board plays the samples at `hz` instead of
+    /// [`EngineConfig::sample_rate_hz`]: it slowed its sample clock for a
+    /// picture its refill cannot keep up with ([`crate::pace`]). The
+    /// refresh rate reported from now on (in `Status`) follows it; the
+    /// samples, and beam times set in microseconds, do not change.
+    pub fn set_playback_rate(&mut self, hz: u32) {
+        if hz != self.dev.playback_hz {
+            self.dev.playback_hz = hz;
+            self.dev.refresh();
+        }
+    }
+
+    /// The refresh rate of the picture at the playback rate, in Hz.
+    pub fn refresh_hz(&self) -> f32 {
+        f32::from(self.dev.refresh_centi_hz) / 100.0
     }
 
     /// Counts up each time the picture changes.
@@ -800,6 +823,13 @@ impl Device<'_> {
             (false, true) => DeviceState::Showing,
             (false, false) => DeviceState::Idle,
         }
+    }
+
+    /// The refresh rate from the last counted frame and the playback rate.
+    fn refresh(&mut self) {
+        let fps =
+            if self.frame_samples == 0 { 0.0 } else { self.playback_hz as f32 / self.frame_samples as f32 };
+        self.refresh_centi_hz = (fps * 100.0).clamp(0.0, f32::from(u16::MAX)) as u16;
     }
 
     fn event(&mut self, e: Event) {
