@@ -79,6 +79,19 @@ impl fmt::Display for PaceError {
 
 impl core::error::Error for PaceError {}
 
+/// What [`Pacer::filled`] takes, from a circular DMA's position: the
+/// samples of the other half played once half `filled` (0 or 1) of a buffer
+/// of two halves of `half` samples is refilled, when the DMA reads slot
+/// `next` next (`2 * half - NDTR` on an STM32). From `half` up: the DMA
+/// was reading the half being refilled (it was late). Out-of-range
+/// arguments are taken modulo the buffer.
+pub fn played(next: usize, filled: usize, half: usize) -> u32 {
+    let len = 2 * half.max(1);
+    let other = (1 - filled % 2) * half.max(1);
+    let used = (next % len + len - other) % len;
+    u32::try_from(used).unwrap_or(u32::MAX)
+}
+
 /// Chooses the sample clock's period. See the [module docs](self).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -129,10 +142,12 @@ impl Pacer {
     /// half when the refill ended (more than a half: it was late). Returns
     /// the new period when it changes, to be set on the timer.
     pub fn filled(&mut self, used: u32) -> Option<u32> {
-        // Products of two u32s fit a u64; their multiples, a u128.
+        // Products of two u32s fit a u64; their multiples saturate, which
+        // only periods and halves of billions would reach (no u128: its
+        // division is a large software routine on the MCU).
         let cost = u64::from(used) * u64::from(self.period);
         let budget = u64::from(self.cfg.half) * u64::from(self.period);
-        if u128::from(cost) * 8 > u128::from(budget) * 7 {
+        if cost.saturating_mul(8) > budget.saturating_mul(7) {
             return self.set(self.aim(cost));
         }
         self.worst = self.worst.max(cost);
@@ -149,8 +164,8 @@ impl Pacer {
     /// The period at which a half costing `cost` ticks takes 3/4 of it,
     /// within the configured range.
     fn aim(&self, cost: u64) -> u32 {
-        let quarters = 3 * u128::from(self.cfg.half);
-        let period = (u128::from(cost) * 4).div_ceil(quarters);
+        let quarters = 3 * u64::from(self.cfg.half);
+        let period = cost.saturating_mul(4).div_ceil(quarters);
         u32::try_from(period).unwrap_or(u32::MAX).clamp(self.cfg.fastest, self.cfg.slowest)
     }
 
@@ -175,7 +190,7 @@ mod tests {
 
     /// A board whose refill of a half costs `cost` timer ticks (and the
     /// main loop nothing else): the samples the DMA plays meanwhile.
-    fn played(cost: u64, period: u32) -> u32 {
+    fn during(cost: u64, period: u32) -> u32 {
         u32::try_from(cost.div_ceil(u64::from(period))).unwrap_or(u32::MAX)
     }
 
@@ -184,13 +199,34 @@ mod tests {
     fn run(pacer: &mut Pacer, halves: u32, cost: impl Fn(u32) -> u64) -> u32 {
         let mut late = 0;
         for k in 0..halves {
-            let used = played(cost(k), pacer.period());
+            let used = during(cost(k), pacer.period());
             if used > CFG.half {
                 late += 1;
             }
             pacer.filled(used);
         }
         late
+    }
+
+    #[test]
+    fn played_counts_from_the_start_of_the_other_half() {
+        // Exhaustive over a small buffer: halves of 4 slots.
+        for filled in 0..2 {
+            for next in 0..8 {
+                let other_start = (1 - filled) * 4;
+                let expect = (next + 8 - other_start) % 8;
+                assert_eq!(played(next, filled, 4), expect as u32, "filled {filled} next {next}");
+            }
+        }
+        // The DMA just entered the other half: nothing played yet.
+        assert_eq!(played(512, 0, 512), 0);
+        assert_eq!(played(0, 1, 512), 0);
+        // About to leave it: all but one.
+        assert_eq!(played(1023, 0, 512), 511);
+        // Already back in the half just refilled: late.
+        assert_eq!(played(3, 0, 512), 515);
+        // Nonsense in, no panic.
+        assert_eq!(played(usize::MAX, 7, 0), 1);
     }
 
     #[test]
@@ -276,7 +312,7 @@ mod tests {
             // 90% to 96% of the cost it settled for: a little faster would
             // do, but not 1/8 faster.
             let cost = u64::from(512 * settled * 3 / 4) * (90 + u64::from(k % 7)) / 100;
-            pacer.filled(played(cost, pacer.period()));
+            pacer.filled(during(cost, pacer.period()));
             if pacer.period() != last {
                 changes += 1;
                 last = pacer.period();
@@ -320,8 +356,8 @@ mod tests {
             cost in 1u64..(512 * 672 * 7 / 8),
         ) {
             let mut pacer = Pacer::new(CFG).unwrap();
-            pacer.filled(played(cost, pacer.period()));
-            let again = played(cost, pacer.period());
+            pacer.filled(during(cost, pacer.period()));
+            let again = during(cost, pacer.period());
             prop_assert!(u64::from(again) * 8 <= u64::from(CFG.half) * 7 + 8, "cost {} used {} at {}", cost, again, pacer.period());
         }
     }

@@ -14,7 +14,8 @@
 //!
 //! X and Y change together and the blank pin switches on the same sample
 //! clock: **one timer, TIM8, paces everything**. At every TIM8 update event
-//! (1 MS/s: 168 MHz / 168):
+//! (1 MS/s: 168 MHz / 168; slower for a picture whose refill cannot keep
+//! up, see below):
 //!
 //! - TIM8's TRGO (MMS = update) triggers both DAC channels (TSEL = 001,
 //!   TEN1 = TEN2 = 1): each moves its holding register to its output at the
@@ -48,7 +49,13 @@
 //! The buffers are double-buffered halves: the DMA1 stream 5 half- and
 //! full-transfer interrupts tell the main loop which half to refill from
 //! the beam scheduler ([`Streaming::fill_from`]; a frame may end inside a
-//! half, and the next frame continues it). A transfer error parks and
+//! half, and the next frame continues it). After each refill the DMA's
+//! position (NDTR) tells how much of the other half has played meanwhile;
+//! a [`isoscope_core::pace::Pacer`] turns that into TIM8's period (ARR,
+//! preloaded): a picture whose refill takes more than 7/8 of a half slows
+//! the sample clock at once (down to [`MIN_SAMPLE_RATE_HZ`]), so the DMA
+//! never replays a stale half, and a lighter one brings it back to
+//! [`SAMPLE_RATE_HZ`]. A transfer error parks and
 //! blanks the beam and stops feeding the independent watchdog, which then
 //! resets the MCU.
 //!
@@ -77,6 +84,11 @@ use stm32f4xx_hal::watchdog::IndependentWatchdog;
 /// setting ([`isoscope_scene::SAMPLE_RATE_HZ`]), so that beam times in
 /// microseconds and the refresh rate it reports hold.
 pub use isoscope_scene::SAMPLE_RATE_HZ;
+
+/// The slowest rate the sample clock is paced down to
+/// ([`isoscope_scene::MIN_SAMPLE_RATE_HZ`]).
+#[cfg(not(feature = "qemu"))]
+use isoscope_scene::MIN_SAMPLE_RATE_HZ;
 
 /// The blank pin's number on its port (PB0).
 pub const BLANK_PIN: u32 = 0;
@@ -483,6 +495,12 @@ mod cpu {
             0
         }
 
+        /// As the DMA path's: the configured rate (there is no sample clock
+        /// to slow).
+        pub fn sample_rate_hz(&self) -> u32 {
+            super::SAMPLE_RATE_HZ
+        }
+
         /// As the DMA path's: always, without a sample clock.
         pub fn ready(&self) -> bool {
             true
@@ -504,11 +522,12 @@ mod dma {
     //! The DMA output path (see the module docs of `board`).
 
     use super::{
-        BLANK, DAC_CH2, DAC_DMAEN1, DAC_EN1, DAC_TEN1, DAC_TSEL1_TIM8, DmaError, Filled, HALF, Out,
-        SAMPLE_RATE_HZ, XY, pac, write_slots,
+        BLANK, DAC_CH2, DAC_DMAEN1, DAC_EN1, DAC_TEN1, DAC_TSEL1_TIM8, DmaError, Filled, HALF,
+        MIN_SAMPLE_RATE_HZ, Out, SAMPLE_RATE_HZ, XY, pac, write_slots,
     };
     use core::sync::atomic::{AtomicU8, AtomicU32, Ordering};
     use isoscope_core::dac::{Beam, SampleSource, Samples};
+    use isoscope_core::pace::{self, PaceConfig, Pacer};
     use stm32f4xx_hal::interrupt;
 
     /// Halves the DMA has finished with (bit 0: first, bit 1: second), set
@@ -541,6 +560,12 @@ mod dma {
         planned: u32,
         /// Late refills while the beam was held.
         forgiven: u32,
+        /// The sample clock's period (TIM8's ARR + 1), slowed when a
+        /// picture's refill cannot keep up.
+        pacer: Pacer,
+        /// Halves whose refill is not reported to the pacer: the first
+        /// ones after the beam was held (they were free long before).
+        unmeasured: u8,
     }
 
     impl Out {
@@ -550,7 +575,11 @@ mod dma {
             // The first update event outputs the DAC's current holding
             // register: the park sample.
             self.park();
-            let mut st = Streaming { out: self, last_beam: Beam::Off, open: None, planned: 0, forgiven: 0 };
+            let ticks = |hz: u32| (self.timer_hz / hz).max(1);
+            let pace = PaceConfig { half: HALF as u32, fastest: ticks(SAMPLE_RATE_HZ), slowest: ticks(MIN_SAMPLE_RATE_HZ) };
+            let Ok(pacer) = Pacer::new(pace) else { super::fault() };
+            let mut st =
+                Streaming { out: self, last_beam: Beam::Off, open: None, planned: 0, forgiven: 0, pacer, unmeasured: 0 };
             for half in 0..2 {
                 let park = st.out.park;
                 st.write(half, 0, &mut Samples(core::iter::repeat(park)));
@@ -588,7 +617,31 @@ mod dma {
             }
             self.open = None;
             FREE.fetch_and(!(1 << half), Ordering::SeqCst);
+            self.pace(half);
             Ok(Filled::Half)
+        }
+
+        /// Half `half` is refilled: tell the pacer how much of the other
+        /// half the DMA has played meanwhile, and set the period it asks
+        /// for (at the next update event: ARR is preloaded).
+        fn pace(&mut self, half: usize) {
+            let Some((tim8, dma1, _)) = self.out.dma.as_ref() else { super::fault() };
+            // NDTR counts the words left in the circular buffer's round:
+            // the DMA reads slot `2 * HALF - NDTR` next.
+            let next = (2 * HALF).saturating_sub(dma1.st(5).ndtr().read().bits() as usize);
+            if self.unmeasured > 0 {
+                self.unmeasured -= 1;
+                return;
+            }
+            if let Some(period) = self.pacer.filled(pace::played(next, half, HALF)) {
+                tim8.arr().write(|w| unsafe { w.bits(period - 1) });
+            }
+        }
+
+        /// The sample rate in force (the pacer slows it for a picture
+        /// whose refill cannot keep up at [`SAMPLE_RATE_HZ`]).
+        pub fn sample_rate_hz(&self) -> u32 {
+            self.pacer.rate_hz(self.out.timer_hz)
         }
 
         /// Fill the rest of the open half (or a whole free one) with the
@@ -604,7 +657,7 @@ mod dma {
             let Some((tim8, dma1, dma2)) = self.out.dma.as_ref() else { super::fault() };
             let dac = &self.out.dac;
             // TIM8: update event at SAMPLE_RATE_HZ, as TRGO and as a DMA request.
-            let arr = (self.out.timer_hz / SAMPLE_RATE_HZ).saturating_sub(1);
+            let arr = self.pacer.period() - 1;
             tim8.cr1().write(|w| unsafe { w.bits(0) });
             tim8.psc().write(|w| unsafe { w.bits(0) });
             tim8.arr().write(|w| unsafe { w.bits(arr) });
@@ -669,7 +722,10 @@ mod dma {
                 cortex_m::peripheral::NVIC::unmask(pac::Interrupt::DMA1_STREAM5);
                 cortex_m::peripheral::NVIC::unmask(pac::Interrupt::DMA2_STREAM1);
             }
-            tim8.cr1().write(|w| w.cen().set_bit());
+            // ARR preloaded: the pacer's new periods start at an update
+            // event (a shorter ARR written mid-period would otherwise let
+            // the counter run past it, round the whole 16 bits).
+            tim8.cr1().write(|w| w.arpe().set_bit().cen().set_bit());
         }
 
         /// Whether [`Self::fill_from`] would start at once (a half is open
@@ -735,6 +791,7 @@ mod dma {
         pub fn release(&mut self) {
             let late = LATE.load(Ordering::Relaxed);
             self.forgiven = self.forgiven.wrapping_add(late.wrapping_sub(self.planned));
+            self.unmeasured = 2;
         }
 
         /// Halves refilled too late so far (not counting the beam held

@@ -216,6 +216,8 @@ struct Timing {
 struct Report {
     timing: Timing,
     late: u32,
+    /// The sample rate last logged.
+    rate_hz: u32,
     serial: serial::Stats,
     core_mhz: u32,
     stack: usize,
@@ -227,10 +229,19 @@ impl Report {
         Self {
             timing: Timing::default(),
             late: 0,
+            rate_hz: board::SAMPLE_RATE_HZ,
             serial: serial::stats(),
             core_mhz: (core_hz / 1_000_000).max(1),
             stack: 0,
             stack_checked_ms: 0,
+        }
+    }
+
+    /// The sample clock runs at `hz` (paced): log a change.
+    fn rate(&mut self, hz: u32, refresh_hz: f32) {
+        if hz != self.rate_hz {
+            self.rate_hz = hz;
+            defmt::info!("isoscope: sample clock {} samples/s, picture refreshed at {} Hz", hz, refresh_hz);
         }
     }
 
@@ -289,6 +300,11 @@ fn run(board: board::Board, engine: &mut Engine<'static>) -> ! {
         if hold && out.hold().is_err() {
             board::fault();
         }
+        // The sample clock may have been slowed (or sped up again) for
+        // this picture: the refresh rate reported follows it.
+        let rate = out.sample_rate_hz();
+        engine.set_playback_rate(rate);
+        report.rate(rate, engine.refresh_hz());
         let t0 = clock::cycles();
         let redrawn = engine.update(clock::now_ms());
         if redrawn {

@@ -53,6 +53,12 @@ pub const QEMU_FRAMES: usize = 2;
 /// DAC samples per second (both channels and the blank pin).
 pub const SAMPLE_RATE_HZ: u32 = 1_000_000;
 
+/// The slowest sample rate the board's pacer ([`isoscope_core::pace`])
+/// may choose for a picture whose refill cannot keep up with
+/// [`SAMPLE_RATE_HZ`]: a half buffer then lasts 2 ms, more than the
+/// densest picture's refill takes.
+pub const MIN_SAMPLE_RATE_HZ: u32 = 250_000;
+
 /// The firmware's version, reported in `Hello`.
 pub const FIRMWARE_VERSION: [u8; 3] = [0, 1, 0];
 
