@@ -645,11 +645,10 @@ impl Dda {
         (v * (1u32 << FRAC) as f32 + 0.5) as i32
     }
 
-    /// Steps from `from` to `to` in `n > 0` steps.
+    /// Steps from `at` to `to` (both [`Dda::fixed`]) in `n > 0` steps.
     #[inline]
-    fn new(from: f32, to: f32, n: i32) -> Self {
-        let at = Self::fixed(from);
-        let d = Self::fixed(to) - at;
+    fn new(at: i32, to: i32, n: i32) -> Self {
+        let d = to - at;
         Self { at, err: 0, q: d.div_euclid(n), r: d.rem_euclid(n) }
     }
 
@@ -685,6 +684,9 @@ pub struct Scheduler<I> {
     /// [`BeamConfig::segment_cap`].
     cap: u32,
     pos: Pos,
+    /// `pos` in the lit steps' fixed point ([`Dda::fixed`]), kept from the
+    /// command that went there rather than converted again.
+    fixed: (i32, i32),
     lit: bool,
     plan: Plan,
     ended: bool,
@@ -729,6 +731,7 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
             cfg,
             corner_cos,
             pos: start,
+            fixed: (Dda::fixed(start.x), Dda::fixed(start.y)),
             lit: false,
             plan: Plan { to: start, ..Plan::default() },
             ended: false,
@@ -776,6 +779,7 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
 
     /// A plan that jumps (blanked) to `to`, then dwells `lit` samples there.
     fn jump(&mut self, to: Pos, lit: u16) -> Plan {
+        self.fixed = (Dda::fixed(to.x), Dda::fixed(to.y));
         let d = self.pos.distance(to);
         self.stats.blank_length += d;
         Plan {
@@ -830,10 +834,13 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
                     let steps = self.cfg.segment_samples_within(length, self.cap);
                     // At most 2^17 / MIN_LIT_STEP + 1 (the cap): an i32.
                     let n = i32::try_from(steps.max(1)).unwrap_or(i32::MAX);
+                    let (ax, ay) = self.fixed;
+                    let (tx, ty) = (Dda::fixed(p.x), Dda::fixed(p.y));
+                    self.fixed = (tx, ty);
                     Plan {
                         to: p,
-                        x: Dda::new(from.x, p.x, n),
-                        y: Dda::new(from.y, p.y, n),
+                        x: Dda::new(ax, tx, n),
+                        y: Dda::new(ay, ty, n),
                         code: self.code(p),
                         blank: 0,
                         step: 0,

@@ -146,7 +146,9 @@ impl<'a> Geometry<'a> {
 
     /// A fixed point code back in voxel coordinates (exact).
     pub fn point(&self, q: Packed) -> Point3 {
-        let k = 1.0 / f32::from(1u16 << self.shift);
+        // 2^-shift, exactly: built from its exponent bits, not a division
+        // (a 14-cycle VDIV on the M4, for every point of every frame).
+        let k = f32::from_bits((127 - u32::from(self.shift)) << 23);
         Point3::new(f32::from(q[0]) * k, f32::from(q[1]) * k, f32::from(q[2]) * k)
     }
 
