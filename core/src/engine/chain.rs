@@ -113,14 +113,20 @@ fn dist2(a: Packed, b: Packed) -> u64 {
         .sum()
 }
 
-/// [`dist2`] as an `f32` (rounded to nearest): by way of `u32` when it
+/// [`dist2`] as an `f32` (rounded to nearest): summed in `u32` when it
 /// fits, which the FPU converts (a `u64` takes a software call on the MCU).
+/// The sum itself is in `u32` (each square of a `u16` difference fits):
+/// taking the `u64` sum and converting it by way of `u32` when it fits was
+/// folded by the compiler back into the `u64` conversion.
 #[inline]
 fn dist2f(a: Packed, b: Packed) -> f32 {
-    let s = dist2(a, b);
-    match u32::try_from(s) {
-        Ok(s) => s as f32,
-        Err(_) => s as f32,
+    let sq = |i: usize| {
+        let d = u32::from(a[i].abs_diff(b[i]));
+        d * d
+    };
+    match sq(0).checked_add(sq(1)).and_then(|s| s.checked_add(sq(2))) {
+        Some(s) => s as f32,
+        None => dist2(a, b) as f32,
     }
 }
 
@@ -217,9 +223,9 @@ impl<'s, 'g, 'a> Index<'s, 'g, 'a> {
         }
         let mut index = Self { src, w, n, bits, heads, links, frags, any_vertex, buckets };
         for f in 0..frags {
-            let (from, to) = index.span(f);
+            let (from, to, every) = index.ends(f);
             for i in from..to {
-                if index.is_end(f, i) {
+                if every || i == from || i + 1 == to {
                     index.link(i);
                 }
             }
@@ -288,10 +294,12 @@ impl<'s, 'g, 'a> Index<'s, 'g, 'a> {
         self.kind(self.span(f).0) == Kind::Dot
     }
 
-    /// Whether point `i` of fragment `f` is one of its ends.
-    fn is_end(&self, f: usize, i: usize) -> bool {
+    /// The point range of fragment `f`, and whether every point of it is an
+    /// end (a closed loop in the order pass); else its first and last are.
+    #[inline]
+    fn ends(&self, f: usize) -> (usize, usize, bool) {
         let (from, to) = self.span(f);
-        i == from || i + 1 == to || (self.any_vertex && self.is_loop(f))
+        (from, to, self.any_vertex && self.kind(from) == Kind::Loop)
     }
 
     fn link(&mut self, i: usize) {
@@ -322,9 +330,9 @@ impl<'s, 'g, 'a> Index<'s, 'g, 'a> {
 
     /// Mark fragment `f` drawn and take its ends out of the grid.
     fn take(&mut self, f: usize) {
-        let (from, to) = self.span(f);
+        let (from, to, every) = self.ends(f);
         for i in from..to {
-            if self.is_end(f, i) {
+            if every || i == from || i + 1 == to {
                 self.unlink(i);
             }
         }
@@ -995,6 +1003,27 @@ mod tests {
                     break;
                 }
             }
+        }
+    }
+
+    #[test]
+    fn dist2f_is_the_exact_square_rounded_once_at_the_extremes() {
+        let far = [0u16, 65535, 37837, 37838, 46341, 46340, 1, 65534];
+        for &a in &far {
+            for &b in &far {
+                for &c in &far {
+                    let (p, q) = ([a, b, c], [0, 0, 0]);
+                    assert_eq!(dist2f(p, q).to_bits(), (dist2(p, q) as f32).to_bits(), "{p:?}");
+                    assert_eq!(dist2f(q, p).to_bits(), (dist2(p, q) as f32).to_bits(), "{p:?}");
+                }
+            }
+        }
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn dist2f_is_the_exact_square_rounded_once(a in proptest::array::uniform3(proptest::num::u16::ANY), b in proptest::array::uniform3(proptest::num::u16::ANY)) {
+            proptest::prop_assert_eq!(dist2f(a, b).to_bits(), (dist2(a, b) as f32).to_bits());
         }
     }
 
