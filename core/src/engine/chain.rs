@@ -120,11 +120,12 @@ fn dist2(a: Packed, b: Packed) -> u64 {
 /// folded by the compiler back into the `u64` conversion.
 #[inline]
 fn dist2f(a: Packed, b: Packed) -> f32 {
-    let sq = |i: usize| {
-        let d = u32::from(a[i].abs_diff(b[i]));
+    let sq = |a: u16, b: u16| {
+        let d = u32::from(a.abs_diff(b));
         d * d
     };
-    match sq(0).checked_add(sq(1)).and_then(|s| s.checked_add(sq(2))) {
+    let ([ax, ay, az], [bx, by, bz]) = (a, b);
+    match sq(ax, bx).checked_add(sq(ay, by)).and_then(|s| s.checked_add(sq(az, bz))) {
         Some(s) => s as f32,
         None => dist2(a, b) as f32,
     }
