@@ -1029,6 +1029,43 @@ mod tests {
     }
 
     proptest::proptest! {
+        #[test]
+        fn frag_of_finds_the_fragment_of_every_point(
+            lens in proptest::collection::vec(1usize..40, 1..120),
+            long in proptest::option::of((0usize..120, 100usize..900)),
+        ) {
+            // Fragments of uneven lengths, one of them perhaps very long,
+            // some taken (drawn: the flag shares the start's word).
+            let mut lens = lens;
+            if let Some((at, n)) = long {
+                let at = at.min(lens.len() - 1);
+                lens[at] = n;
+            }
+            let points: usize = lens.iter().sum();
+            let (mut p, mut k) = store(points);
+            let mut src = Geometry::new(&mut p, &mut k);
+            src.reset(0);
+            let mut starts = Vec::new();
+            for (f, &n) in lens.iter().enumerate() {
+                starts.push(src.len());
+                for j in 0..n {
+                    let q = [f as u16, j as u16, 0];
+                    src.push_raw(q, if j == 0 { if n == 1 { Kind::Dot } else { Kind::Move } } else { Kind::Line });
+                }
+            }
+            let mut scratch = vec![0u8; 16 * points + 4096];
+            let mut x = Index::build(&src, &mut scratch, false, true).expect("room");
+            for f in (0..lens.len()).step_by(3) {
+                x.take(f);
+            }
+            for i in 0..points {
+                let want = starts.partition_point(|&s| s <= i) - 1;
+                proptest::prop_assert_eq!(x.frag_of(i), want, "point {}", i);
+            }
+        }
+    }
+
+    proptest::proptest! {
         #![proptest_config(proptest::prelude::ProptestConfig::with_cases(300))]
         #[test]
         fn two_opt_keeps_lengths_without_changing_a_move(
