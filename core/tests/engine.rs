@@ -369,11 +369,7 @@ fn a_slowed_sample_clock_is_reported_in_the_refresh_rate() {
     let mut host = Host::new();
     e.feed(&host.volume(&v), 0);
     assert!(e.update(1));
-    let samples = {
-        let mut frame = e.frame();
-        frame.skip_to_end();
-        frame.stats().samples
-    };
+    let samples = isoscope_core::beam::frame_stats(e.commands(), e.beam()).samples;
     let centi = |hz: u32| ((hz as f32 / samples as f32) * 100.0) as u16;
     let status = |e: &mut Engine<'_>| {
         answers(e);
@@ -392,11 +388,7 @@ fn a_slowed_sample_clock_is_reported_in_the_refresh_rate() {
     // A new picture is counted at the rate in force.
     e.feed(&host.volume(&Vol::demo(Demo::Torus, 10, SampleType::U8)), 3);
     assert!(e.update(4));
-    let samples = {
-        let mut frame = e.frame();
-        frame.skip_to_end();
-        frame.stats().samples
-    };
+    let samples = isoscope_core::beam::frame_stats(e.commands(), e.beam()).samples;
     assert_eq!(status(&mut e), Some(((500_000.0 / samples as f32) * 100.0) as u16));
 }
 

@@ -625,14 +625,14 @@ mod dma {
         /// half the DMA has played meanwhile, and set the period it asks
         /// for (at the next update event: ARR is preloaded).
         fn pace(&mut self, half: usize) {
-            let Some((tim8, dma1, _)) = self.out.dma.as_ref() else { super::fault() };
-            // NDTR counts the words left in the circular buffer's round:
-            // the DMA reads slot `2 * HALF - NDTR` next.
-            let next = (2 * HALF).saturating_sub(dma1.st(5).ndtr().read().bits() as usize);
             if self.unmeasured > 0 {
                 self.unmeasured -= 1;
                 return;
             }
+            let Some((tim8, dma1, _)) = self.out.dma.as_ref() else { super::fault() };
+            // NDTR counts the words left in the circular buffer's round:
+            // the DMA reads slot `2 * HALF - NDTR` next.
+            let next = (2 * HALF).saturating_sub(dma1.st(5).ndtr().read().bits() as usize);
             if let Some(period) = self.pacer.filled(pace::played(next, half, HALF)) {
                 tim8.arr().write(|w| unsafe { w.bits(period - 1) });
             }

@@ -42,7 +42,7 @@ pub use geometry::{Commands, Geometry, Kind, Packed};
 pub use session::REPLAY;
 pub use stream::VolumeSpec;
 
-use crate::beam::{BeamConfig, BeamConfigError, Scheduler, frame_stats};
+use crate::beam::{BeamConfig, BeamConfigError, FrameStats, Scheduler, frame_stats};
 use crate::command::{Command, Point3};
 use crate::display::OptimizeConfig;
 use crate::screen::ScreenPoint;
@@ -403,8 +403,8 @@ struct Device<'a> {
     display_capacity: usize,
     /// The rate the board plays samples at ([`Engine::set_playback_rate`]).
     playback_hz: u32,
-    /// Samples in a frame of the picture, as last counted.
-    frame_samples: u64,
+    /// A frame of the picture, as last counted.
+    frame: FrameStats,
     refresh_centi_hz: u16,
     tx: Deque<u8, TX_QUEUE>,
     events: Deque<Event, EVENT_QUEUE>,
@@ -521,7 +521,7 @@ impl<'a> Engine<'a> {
                 status_due: false,
                 display_capacity,
                 playback_hz: cfg.sample_rate_hz,
-                frame_samples: 0,
+                frame: FrameStats::default(),
                 refresh_centi_hz: 0,
                 tx: Deque::new(),
                 events: Deque::new(),
@@ -651,7 +651,7 @@ impl<'a> Engine<'a> {
     fn count(&mut self) {
         let stats = frame_stats(self.commands(), &self.dev.beam);
         let dev = &mut self.dev;
-        dev.frame_samples = stats.samples;
+        dev.frame = stats;
         dev.refresh();
         let blank = stats.blank_length / stats.lit_length.max(f32::MIN_POSITIVE);
         dev.event(Event::Redrawn {
@@ -827,8 +827,7 @@ impl Device<'_> {
 
     /// The refresh rate from the last counted frame and the playback rate.
     fn refresh(&mut self) {
-        let fps =
-            if self.frame_samples == 0 { 0.0 } else { self.playback_hz as f32 / self.frame_samples as f32 };
+        let fps = self.frame.fps(self.playback_hz as f32);
         self.refresh_centi_hz = (fps * 100.0).clamp(0.0, f32::from(u16::MAX)) as u16;
     }
 
