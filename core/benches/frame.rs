@@ -18,7 +18,7 @@
 use criterion::{Criterion, Throughput, black_box, criterion_group, criterion_main};
 use isoscope_core::dac::Sample;
 use isoscope_core::demo::Demo;
-use isoscope_core::engine::{Engine, EngineConfig, StaticBuffers};
+use isoscope_core::engine::{Engine, EngineConfig, Geometry, StaticBuffers};
 use isoscope_core::wire::{AXIS_X, AXIS_Y, AXIS_Z, Levels, MAX_CHUNK, Message, SampleType, encode};
 
 const SIDE: usize = 16;
@@ -27,7 +27,7 @@ const HALF: usize = 512;
 
 /// The firmware's engine memory: 32 KB slices, 128-sample rows, 8192
 /// points a surface.
-type Mem = StaticBuffers<{ 32 * 1024 }, 128, 8192, 2048>;
+type Mem = StaticBuffers<{ 32 * 1024 }, 128, { Geometry::bytes_for(8192) }>;
 
 fn engine(mem: &mut Mem) -> Engine<'_> {
     Engine::new(EngineConfig::default(), mem.buffers()).expect("engine")

@@ -5,7 +5,7 @@
 use isoscope_core::command::{Command, Point3};
 use isoscope_core::demo::Demo;
 use isoscope_core::display::OptimizeConfig;
-use isoscope_core::engine::{AbortReason, Buffers, Engine, EngineConfig, Event, Geometry, Packed};
+use isoscope_core::engine::{AbortReason, Buffers, Engine, EngineConfig, Event, Geometry};
 use isoscope_core::grid::{Planes, Volume};
 use isoscope_core::surface::{SliceId, SurfaceSink, contour_slice, contour_volume};
 use isoscope_core::trace::Traversal;
@@ -24,8 +24,7 @@ use std::convert::Infallible;
 struct Mem {
     slices: Vec<u8>,
     rows: Vec<f32>,
-    points: Vec<Packed>,
-    kinds: Vec<u8>,
+    surfaces: Vec<u8>,
     scratch: Vec<u8>,
 }
 
@@ -34,20 +33,13 @@ impl Mem {
         Self {
             slices: vec![0; 2 * slice],
             rows: vec![0.0; 2 * extent],
-            points: vec![[0; 3]; 2 * points],
-            kinds: vec![0; 2 * points.div_ceil(4)],
+            surfaces: vec![0; 2 * Geometry::bytes_for(points)],
             scratch: vec![0; 8 * points],
         }
     }
 
     fn buffers(&mut self) -> Buffers<'_> {
-        Buffers::halves(
-            &mut self.slices,
-            &mut self.rows,
-            &mut self.points,
-            &mut self.kinds,
-            &mut self.scratch,
-        )
+        Buffers::halves(&mut self.slices, &mut self.rows, &mut self.surfaces, &mut self.scratch)
     }
 }
 

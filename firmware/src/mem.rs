@@ -3,12 +3,12 @@
 //! [`Engine`]. A change of `Buffers`' shape stays in this module.
 //!
 //! Sizes ([`isoscope_scene`]: `S` = [`SLICE_BYTES`], `E` = [`EXTENT`],
-//! `P` = [`POINTS`]):
+//! `P` = [`isoscope_scene::POINTS`]):
 //!
 //! | buffer | bytes | where |
 //! |---|---|---|
 //! | slices, twice (the stitching and ordering scratch between volumes) | `2 S` = 64 KB | CCM |
-//! | two surfaces: points (6 B) and kinds (2 bits) | `12.5 P` = 102,400 | SRAM |
+//! | two surfaces: points (6 B) and their kinds (2 bits) | `12.5 P` = 102,400 | SRAM |
 //! | rows, twice (`f32`) | `8 E` = 1 KB | SRAM |
 //!
 //! The CCM (64 KB at 0x1000_0000) is reachable by the CPU only, which is
@@ -24,8 +24,8 @@
 
 use core::mem::MaybeUninit;
 use core::sync::atomic::{AtomicBool, Ordering};
-use isoscope_core::engine::{Buffers, Engine, EngineError, Packed};
-use isoscope_scene::{EXTENT, KINDS, POINTS, SLICE_BYTES, engine_config};
+use isoscope_core::engine::{Buffers, Engine, EngineError};
+use isoscope_scene::{EXTENT, SLICE_BYTES, SURFACE_BYTES, engine_config};
 
 /// The slices, in the core-coupled memory (in SRAM under QEMU).
 struct Ccm {
@@ -34,8 +34,7 @@ struct Ccm {
 
 /// The rest, in SRAM (.bss, zeroed by cortex-m-rt).
 struct Sram {
-    points: [[Packed; POINTS]; 2],
-    kinds: [[u8; KINDS]; 2],
+    surfaces: [[u8; SURFACE_BYTES]; 2],
     rows: [[f32; EXTENT]; 2],
 }
 
@@ -49,8 +48,7 @@ const _: () = assert!(CCM_BYTES <= 64 * 1024, "the CCM holds 64 KB");
 #[cfg_attr(not(feature = "qemu"), unsafe(link_section = ".ccmram"))]
 static mut CCM: MaybeUninit<Ccm> = MaybeUninit::uninit();
 
-static mut SRAM: Sram =
-    Sram { points: [[[0; 3]; POINTS]; 2], kinds: [[0; KINDS]; 2], rows: [[0.0; EXTENT]; 2] };
+static mut SRAM: Sram = Sram { surfaces: [[0; SURFACE_BYTES]; 2], rows: [[0.0; EXTENT]; 2] };
 
 /// The engine itself (its frame decoder, answer and event queues), in
 /// SRAM rather than on the stack.
@@ -79,16 +77,9 @@ pub fn engine() -> Option<Result<&'static mut Engine<'static>, EngineError>> {
         ccm.as_mut_ptr().write_bytes(0, 1);
         (ccm.assume_init_mut(), &mut *core::ptr::addr_of_mut!(SRAM))
     };
-    let [p0, p1] = &mut sram.points;
-    let [k0, k1] = &mut sram.kinds;
+    let [front, back] = &mut sram.surfaces;
     let [r0, r1] = &mut sram.rows;
-    let buffers = Buffers {
-        slices: &mut ccm.slices,
-        rows: [r0, r1],
-        front: (p0, k0),
-        back: (p1, k1),
-        scratch: &mut [],
-    };
+    let buffers = Buffers { slices: &mut ccm.slices, rows: [r0, r1], front, back, scratch: &mut [] };
     Some(Engine::new(engine_config(), buffers).map(|engine| {
         // SAFETY: reached once (TAKEN): the only reference to ENGINE.
         unsafe { (*core::ptr::addr_of_mut!(ENGINE)).write(engine) }

@@ -156,4 +156,5 @@ pub fn reference_precheck(frame: &[u8]) -> Result<(), WireError> {
 /// Engine memory for the `engine` target: slices of 1 KB, rows of 32, 4096
 /// points in each surface (no extra scratch: the slices are it, as on the
 /// MCU).
-pub type EngineMem = isoscope_core::engine::StaticBuffers<1024, 32, 4096, 1024>;
+pub type EngineMem =
+    isoscope_core::engine::StaticBuffers<1024, 32, { isoscope_core::engine::Geometry::bytes_for(4096) }>;

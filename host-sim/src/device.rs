@@ -6,7 +6,7 @@ use crate::phosphor::{Phosphor, PhosphorConfig};
 use crate::virtual_dac::VirtualDac;
 use anyhow::{Context, Result};
 use isoscope_core::dac::{Beam, Dac};
-use isoscope_core::engine::{Buffers, Engine, EngineConfig, Event, Packed};
+use isoscope_core::engine::{Buffers, Engine, EngineConfig, Event, Geometry};
 use std::io::{ErrorKind, Read, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -16,8 +16,7 @@ use std::time::{Duration, Instant};
 pub struct HostBuffers {
     slices: Vec<u8>,
     rows: Vec<f32>,
-    points: Vec<Packed>,
-    kinds: Vec<u8>,
+    surfaces: Vec<u8>,
     scratch: Vec<u8>,
 }
 
@@ -29,21 +28,14 @@ impl HostBuffers {
         Self {
             slices: vec![0; 2 * slice_bytes],
             rows: vec![0.0; 2 * extent],
-            points: vec![[0; 3]; 2 * points],
-            kinds: vec![0; 2 * points.div_ceil(4)],
+            surfaces: vec![0; 2 * Geometry::bytes_for(points)],
             scratch: vec![0; 8 * points],
         }
     }
 
     /// The buffers, lent to an engine.
     pub fn buffers(&mut self) -> Buffers<'_> {
-        Buffers::halves(
-            &mut self.slices,
-            &mut self.rows,
-            &mut self.points,
-            &mut self.kinds,
-            &mut self.scratch,
-        )
+        Buffers::halves(&mut self.slices, &mut self.rows, &mut self.surfaces, &mut self.scratch)
     }
 }
 

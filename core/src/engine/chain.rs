@@ -41,7 +41,7 @@ const WINDOW: usize = 48;
 /// Dropped points remembered to check a merged chord against.
 const MERGE_SPAN: usize = 8;
 
-/// What [`chain`] did.
+/// What stitching and ordering (`chain`) did.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ChainStats {
@@ -965,8 +965,8 @@ mod tests {
     use super::*;
     use crate::command::{Command, Point3};
 
-    fn store(n: usize) -> (Vec<Packed>, Vec<u8>) {
-        (vec![[0; 3]; n], vec![0; n.div_ceil(4)])
+    fn store(n: usize) -> Vec<u8> {
+        vec![0; Geometry::bytes_for(n)]
     }
 
     fn seg(g: &mut Geometry<'_>, a: [f32; 3], b: [f32; 3]) {
@@ -1042,8 +1042,8 @@ mod tests {
                 lens[at] = n;
             }
             let points: usize = lens.iter().sum();
-            let (mut p, mut k) = store(points);
-            let mut src = Geometry::new(&mut p, &mut k);
+            let mut p = store(points);
+            let mut src = Geometry::new(&mut p);
             src.reset(0);
             let mut starts = Vec::new();
             for (f, &n) in lens.iter().enumerate() {
@@ -1076,8 +1076,8 @@ mod tests {
         ) {
             // Open polylines (some closed into loops, some single dots) in
             // the order given: a poor tour, so 2-opt has moves to make.
-            let (mut p, mut k) = store(256);
-            let mut src = Geometry::new(&mut p, &mut k);
+            let mut p = store(256);
+            let mut src = Geometry::new(&mut p);
             src.reset(0);
             for (pts, closed) in &frags {
                 let kind = match (pts.len(), closed) {
@@ -1113,8 +1113,8 @@ mod tests {
         ) {
             // Segments, dots and three-point fragments on a small lattice:
             // many ends meet, equal segments and dots on lines get culled.
-            let (mut p, mut k) = store(512);
-            let mut src = Geometry::new(&mut p, &mut k);
+            let mut p = store(512);
+            let mut src = Geometry::new(&mut p);
             src.reset(0);
             for &(a, b, shape) in &segs {
                 match shape {
@@ -1132,8 +1132,8 @@ mod tests {
             }
             let mut out = Vec::new();
             for hashed in [true, false] {
-                let (mut p2, mut k2) = store(512);
-                let mut dst = Geometry::new(&mut p2, &mut k2);
+                let mut p2 = store(512);
+                let mut dst = Geometry::new(&mut p2);
                 let mut scratch = vec![0u8; 16 * 1024];
                 let st = chain_on(&src, &mut dst, &mut scratch, [0; 3], 0.0, Pass::Stitch, hashed);
                 proptest::prop_assert!(st.ordered);
@@ -1145,16 +1145,16 @@ mod tests {
 
     #[test]
     fn a_square_of_four_fragments_in_any_order_becomes_one_closed_loop() {
-        let (mut p, mut k) = store(16);
-        let mut src = Geometry::new(&mut p, &mut k);
+        let mut p = store(16);
+        let mut src = Geometry::new(&mut p);
         src.reset(8);
         // Shuffled and with two fragments backwards.
         seg(&mut src, [1.0, 0.0, 0.0], [1.0, 1.0, 0.0]);
         seg(&mut src, [0.0, 1.0, 0.0], [0.0, 0.0, 0.0]);
         seg(&mut src, [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]);
         seg(&mut src, [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]);
-        let (mut p2, mut k2) = store(16);
-        let mut dst = Geometry::new(&mut p2, &mut k2);
+        let mut p2 = store(16);
+        let mut dst = Geometry::new(&mut p2);
         let mut scratch = [0u8; 256];
         let st = chain(&src, &mut dst, &mut scratch, [0; 3], 0.0, Pass::Order);
         assert!(st.ordered);
@@ -1168,14 +1168,14 @@ mod tests {
 
     #[test]
     fn collinear_points_merge_within_tolerance_only() {
-        let (mut p, mut k) = store(16);
-        let mut src = Geometry::new(&mut p, &mut k);
+        let mut p = store(16);
+        let mut src = Geometry::new(&mut p);
         src.reset(8);
         seg(&mut src, [0.0, 0.0, 0.0], [1.0, 0.001, 0.0]);
         seg(&mut src, [1.0, 0.001, 0.0], [2.0, 0.0, 0.0]);
         seg(&mut src, [2.0, 0.0, 0.0], [2.0, 1.0, 0.0]);
-        let (mut p2, mut k2) = store(16);
-        let mut dst = Geometry::new(&mut p2, &mut k2);
+        let mut p2 = store(16);
+        let mut dst = Geometry::new(&mut p2);
         let mut scratch = [0u8; 256];
         let st = chain(&src, &mut dst, &mut scratch, [0; 3], 0.01, Pass::Order);
         assert_eq!((st.polylines, st.merged, st.points_out), (1, 1, 3));
@@ -1185,13 +1185,13 @@ mod tests {
 
     #[test]
     fn too_little_scratch_copies_in_order() {
-        let (mut p, mut k) = store(16);
-        let mut src = Geometry::new(&mut p, &mut k);
+        let mut p = store(16);
+        let mut src = Geometry::new(&mut p);
         src.reset(8);
         seg(&mut src, [5.0, 0.0, 0.0], [6.0, 0.0, 0.0]);
         seg(&mut src, [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]);
-        let (mut p2, mut k2) = store(16);
-        let mut dst = Geometry::new(&mut p2, &mut k2);
+        let mut p2 = store(16);
+        let mut dst = Geometry::new(&mut p2);
         let st = chain(&src, &mut dst, &mut [0u8; 8], [0; 3], 0.0, Pass::Order);
         assert!(!st.ordered);
         let a: Vec<_> = src.commands().collect();

@@ -3,7 +3,9 @@
 //!
 //! A point is three `u16` in fixed point (`1 / 2^shift` voxel, the shift
 //! chosen per volume so that its largest extent fills the `u16` range), and
-//! its command kind takes 2 bits: 6.25 bytes a point. The quantisation step
+//! its command kind takes 2 bits: 6.25 bytes a point, in one byte buffer
+//! (no alignment asked: any bytes the caller has spare can hold a surface).
+//! The quantisation step
 //! is about 1/16 LSB of a 12-bit screen whatever the volume's size, and a
 //! crossing shared by two subgrids or slices stays bit-identical (the same
 //! `f32` quantises to the same code).
@@ -52,9 +54,9 @@ impl Kind {
     }
 }
 
-/// Contour commands in voxel coordinates over caller storage: `points`
-/// (6 bytes each) and `kinds` (4 a byte). The capacity is the smaller of
-/// `points.len()` and `4 * kinds.len()`.
+/// Contour commands in voxel coordinates over caller bytes: the points (6
+/// bytes each, little-endian `u16`s), then their kinds (4 a byte). Bytes
+/// for `n` points: [`Geometry::bytes_for`].
 ///
 /// `push` hands the command back when full and counts it; a polyline cut
 /// short by the capacity keeps the part that fitted, and a lone trailing
@@ -62,7 +64,7 @@ impl Kind {
 /// commands.
 #[derive(Debug, PartialEq)]
 pub struct Geometry<'a> {
-    points: &'a mut [Packed],
+    points: &'a mut [[u8; 6]],
     kinds: &'a mut [u8],
     len: usize,
     dropped: u32,
@@ -74,9 +76,38 @@ pub struct Geometry<'a> {
 }
 
 impl<'a> Geometry<'a> {
-    /// An empty store over `points` and `kinds`, at the finest scale.
-    pub fn new(points: &'a mut [Packed], kinds: &'a mut [u8]) -> Self {
+    /// An empty store over `bytes`, at the finest scale: as many points
+    /// as they hold ([`Geometry::bytes_for`]).
+    pub fn new(bytes: &'a mut [u8]) -> Self {
+        let n = Self::points_in(bytes.len());
+        let (points, kinds) = bytes.split_at_mut(6 * n);
+        let points = points.as_chunks_mut::<6>().0;
         Self { points, kinds, len: 0, dropped: 0, broken: false, shift: 0 }
+    }
+
+    /// Bytes that hold `points` points: 6 each, and their kinds (2 bits
+    /// each, rounded up to a byte).
+    pub const fn bytes_for(points: usize) -> usize {
+        6 * points + points.div_ceil(4)
+    }
+
+    /// Points that `bytes` bytes hold: the most `n` with
+    /// `bytes_for(n) <= bytes`.
+    pub const fn points_in(bytes: usize) -> usize {
+        // 6.25 bytes a point, less the rounding of the last kind byte.
+        let n = bytes / 25 * 4;
+        let rest = bytes % 25;
+        // In the last 25 bytes: up to 3 more points (6 bytes each, and
+        // their kinds' one byte).
+        n + if rest >= 19 {
+            3
+        } else if rest >= 13 {
+            2
+        } else if rest >= 7 {
+            1
+        } else {
+            0
+        }
     }
 
     /// The fixed point shift for a volume of `dims` samples: the largest
@@ -157,7 +188,7 @@ impl<'a> Geometry<'a> {
         if i >= self.len {
             return None;
         }
-        let p = *self.points.get(i)?;
+        let p = unpack(self.points.get(i)?);
         let byte = *self.kinds.get(i / 4)?;
         Some((p, Kind::from_bits(byte >> (2 * (i % 4)))))
     }
@@ -168,7 +199,7 @@ impl<'a> Geometry<'a> {
         if i >= self.len {
             return None;
         }
-        self.points.get(i).copied()
+        self.points.get(i).map(unpack)
     }
 
     /// The kind of point `i` alone.
@@ -195,7 +226,7 @@ impl<'a> Geometry<'a> {
             return false;
         }
         if let Some(slot) = self.points.get_mut(self.len) {
-            *slot = q;
+            *slot = pack(q);
         }
         self.set_kind(self.len, kind);
         self.len += 1;
@@ -255,6 +286,20 @@ impl<'a> Geometry<'a> {
     }
 }
 
+/// A point as its 6 stored bytes.
+#[inline]
+fn pack([x, y, z]: Packed) -> [u8; 6] {
+    let ([a, b], [c, d], [e, f]) = (x.to_le_bytes(), y.to_le_bytes(), z.to_le_bytes());
+    [a, b, c, d, e, f]
+}
+
+/// A point from its 6 stored bytes.
+#[inline]
+fn unpack(b: &[u8; 6]) -> Packed {
+    let [a, b0, c, d, e, f] = *b;
+    [u16::from_le_bytes([a, b0]), u16::from_le_bytes([c, d]), u16::from_le_bytes([e, f])]
+}
+
 /// The commands of a [`Geometry`] ([`Geometry::commands`]).
 #[derive(Debug, Clone)]
 pub struct Commands<'g, 'a> {
@@ -308,14 +353,42 @@ mod tests {
         Point3::new(x, 0.0, 0.0)
     }
 
-    fn store(n: usize) -> (Vec<Packed>, Vec<u8>) {
-        (vec![[0; 3]; n], vec![0; n.div_ceil(4)])
+    fn store(n: usize) -> Vec<u8> {
+        vec![0; Geometry::bytes_for(n)]
+    }
+
+    #[test]
+    fn bytes_hold_the_points_they_say() {
+        for n in 0..200 {
+            let b = Geometry::bytes_for(n);
+            assert_eq!(Geometry::points_in(b), n, "{n}");
+            assert_eq!(Geometry::points_in(b - usize::from(n > 0)), n.saturating_sub(1), "{n}");
+            assert_eq!(Geometry::new(&mut vec![0; b]).capacity(), n);
+        }
+        for bytes in 0..300 {
+            let n = Geometry::points_in(bytes);
+            assert!(Geometry::bytes_for(n) <= bytes && Geometry::bytes_for(n + 1) > bytes, "{bytes}");
+        }
+    }
+
+    #[test]
+    fn points_read_back_as_written_at_any_alignment() {
+        let mut bytes = vec![0u8; Geometry::bytes_for(3) + 1];
+        let mut g = Geometry::new(&mut bytes[1..]);
+        let q = [[0, 0xFFFF, 0x1234], [0x8001, 7, 0xFF00], [1, 2, 3]];
+        for (i, &p) in q.iter().enumerate() {
+            assert!(g.push_raw(p, if i == 0 { Kind::Move } else { Kind::Line }));
+        }
+        assert!(!g.push_raw([9; 3], Kind::Line));
+        assert_eq!((0..3).map(|i| g.point_at(i).unwrap()).collect::<Vec<_>>(), q);
+        assert_eq!(bytes[1..3], [0, 0]);
+        assert_eq!(bytes[3..5], [0xFF, 0xFF]);
     }
 
     #[test]
     fn push_hands_back_when_full_and_takes_back_a_lone_move() {
-        let (mut pts, mut kinds) = store(3);
-        let mut g = Geometry::new(&mut pts, &mut kinds);
+        let mut bytes = store(3);
+        let mut g = Geometry::new(&mut bytes);
         g.reset(4);
         assert_eq!(g.push(Command::MoveTo(p(0.0))), Ok(()));
         assert_eq!(g.push(Command::LineTo(p(1.0))), Ok(()));
@@ -348,8 +421,8 @@ mod tests {
 
     #[test]
     fn quantisation_is_exact_on_the_grid_and_within_half_a_step() {
-        let (mut pts, mut kinds) = store(1);
-        let mut g = Geometry::new(&mut pts, &mut kinds);
+        let mut bytes = store(1);
+        let mut g = Geometry::new(&mut bytes);
         g.reset(Geometry::shift_for([128, 128, 84]));
         let step = 1.0 / 512.0;
         for v in [0.0f32, 1.0, 63.5, 127.0, 0.3333, 101.12345, 126.999] {
@@ -362,8 +435,8 @@ mod tests {
 
     #[test]
     fn kinds_pack_four_a_byte_and_loops_close() {
-        let (mut pts, mut kinds) = store(9);
-        let mut g = Geometry::new(&mut pts, &mut kinds);
+        let mut bytes = store(9);
+        let mut g = Geometry::new(&mut bytes);
         g.reset(0);
         let q = |x: u16| [x, 0, 0];
         for (x, k) in [

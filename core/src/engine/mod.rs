@@ -64,14 +64,15 @@ pub const EVENT_QUEUE: usize = 16;
 /// The engine's memory, lent by the caller.
 ///
 /// - `slices`: both slice buffers, one after the other: half of it is the
-///   largest slice, `nx * ny * sample size` bytes. Between volumes it is the
-///   scratch for stitching and ordering, which takes about 6 bytes a point
-///   of the surface (14 a fragment): so the slices should hold at least
-///   `6 * points` bytes in all, or a large surface is shown unordered.
+///   largest slice, `nx * ny * sample size` bytes. Between volumes it is
+///   the scratch for stitching and ordering, which takes about 6 bytes a
+///   point of the surface (14 a fragment): so the slices should hold at
+///   least `6 * points` bytes in all, or a large surface is shown
+///   unordered.
 /// - `rows`: two row buffers; each sets the largest `nx` and `ny`.
-/// - `front`, `back`: the two surfaces (on screen, being received): points
-///   (6 bytes each) and their kinds (2 bits each: `kinds.len() * 4 >=
-///   points`).
+/// - `front`, `back`: the bytes of the two surfaces (on screen, being
+///   received), [`Geometry::bytes_for`] the points each holds (6.25 bytes
+///   a point).
 /// - `scratch`: more room for stitching and ordering, where memory is
 ///   plenty (the host); the larger of it and the idle slices is used. Empty
 ///   on the MCU.
@@ -81,29 +82,27 @@ pub struct Buffers<'a> {
     pub slices: &'a mut [u8],
     /// Two rows of samples widened to `f32`.
     pub rows: [&'a mut [f32]; 2],
-    /// The picture on screen: points and packed kinds.
-    pub front: (&'a mut [Packed], &'a mut [u8]),
-    /// The surface being received: points and packed kinds.
-    pub back: (&'a mut [Packed], &'a mut [u8]),
+    /// The picture on screen.
+    pub front: &'a mut [u8],
+    /// The surface being received.
+    pub back: &'a mut [u8],
     /// Extra scratch (may be empty).
     pub scratch: &'a mut [u8],
 }
 
 impl<'a> Buffers<'a> {
     /// Buffers from one block of each kind, cut in two halves: `rows` into
-    /// the two rows, `points` and `kinds` into the two surfaces (front
-    /// first). `slices` holds both slices as it is.
+    /// the two rows, `surfaces` into the two surfaces (front first).
+    /// `slices` holds both slices as it is.
     pub fn halves(
         slices: &'a mut [u8],
         rows: &'a mut [f32],
-        points: &'a mut [Packed],
-        kinds: &'a mut [u8],
+        surfaces: &'a mut [u8],
         scratch: &'a mut [u8],
     ) -> Self {
         let (r0, r1) = rows.split_at_mut(rows.len() / 2);
-        let (p0, p1) = points.split_at_mut(points.len() / 2);
-        let (k0, k1) = kinds.split_at_mut(kinds.len() / 2);
-        Self { slices, rows: [r0, r1], front: (p0, k0), back: (p1, k1), scratch }
+        let (front, back) = surfaces.split_at_mut(surfaces.len() / 2);
+        Self { slices, rows: [r0, r1], front, back, scratch }
     }
 }
 
@@ -111,30 +110,22 @@ impl<'a> Buffers<'a> {
 ///
 /// - `SLICE`: bytes in one slice (`nx * ny * sample size`), twice.
 /// - `EXTENT`: the largest `nx` or `ny`.
-/// - `POINTS`: points in each of the two surfaces.
-/// - `KINDS`: `POINTS / 4`, rounded up (the kinds take 2 bits a point).
+/// - `SURFACE`: bytes of each of the two surfaces:
+///   [`Geometry::bytes_for`] the points it holds.
 ///
-/// It takes `2 * SLICE + 8 * EXTENT + 12.5 * POINTS` bytes; for slices of
+/// It takes `2 * SLICE + 8 * EXTENT + 2 * SURFACE` bytes; for slices of
 /// 128 x 128 `u16` and 2 x 8192 points, 167 KB.
 #[derive(Debug, Clone, PartialEq)]
-pub struct StaticBuffers<const SLICE: usize, const EXTENT: usize, const POINTS: usize, const KINDS: usize> {
+pub struct StaticBuffers<const SLICE: usize, const EXTENT: usize, const SURFACE: usize> {
     slices: [[u8; SLICE]; 2],
     rows: [[f32; EXTENT]; 2],
-    points: [[Packed; POINTS]; 2],
-    kinds: [[u8; KINDS]; 2],
+    surfaces: [[u8; SURFACE]; 2],
 }
 
-impl<const SLICE: usize, const EXTENT: usize, const POINTS: usize, const KINDS: usize>
-    StaticBuffers<SLICE, EXTENT, POINTS, KINDS>
-{
+impl<const SLICE: usize, const EXTENT: usize, const SURFACE: usize> StaticBuffers<SLICE, EXTENT, SURFACE> {
     /// Zeroed buffers.
     pub const fn new() -> Self {
-        Self {
-            slices: [[0; SLICE]; 2],
-            rows: [[0.0; EXTENT]; 2],
-            points: [[[0; 3]; POINTS]; 2],
-            kinds: [[0; KINDS]; 2],
-        }
+        Self { slices: [[0; SLICE]; 2], rows: [[0.0; EXTENT]; 2], surfaces: [[0; SURFACE]; 2] }
     }
 
     /// The buffers, lent to an [`Engine`].
@@ -142,15 +133,14 @@ impl<const SLICE: usize, const EXTENT: usize, const POINTS: usize, const KINDS: 
         Buffers::halves(
             self.slices.as_flattened_mut(),
             self.rows.as_flattened_mut(),
-            self.points.as_flattened_mut(),
-            self.kinds.as_flattened_mut(),
+            self.surfaces.as_flattened_mut(),
             &mut [],
         )
     }
 }
 
-impl<const SLICE: usize, const EXTENT: usize, const POINTS: usize, const KINDS: usize> Default
-    for StaticBuffers<SLICE, EXTENT, POINTS, KINDS>
+impl<const SLICE: usize, const EXTENT: usize, const SURFACE: usize> Default
+    for StaticBuffers<SLICE, EXTENT, SURFACE>
 {
     fn default() -> Self {
         Self::new()
@@ -501,8 +491,8 @@ impl<'a> Engine<'a> {
         if stream.slice_capacity() < 16 || stream.row_capacity() < 2 {
             return Err(EngineError::Buffers);
         }
-        let front = Geometry::new(front.0, front.1);
-        let back = Geometry::new(back.0, back.1);
+        let front = Geometry::new(front);
+        let back = Geometry::new(back);
         let display_capacity = front.capacity().min(back.capacity());
         Ok(Self {
             decoder: ProtocolDecoder::new(),

@@ -42,7 +42,9 @@ use isoscope_core::wire::{
     AXIS_X, AXIS_Y, AXIS_Z, FrameDecoder, Levels, MAX_CHUNK, MAX_FRAME_LEN, Message, PROTOCOL_VERSION,
     SampleType, encode,
 };
-use isoscope_scene::{EXTENT, KINDS, POINTS, QEMU_FRAMES, SLICE_BYTES, boot_frames, engine_config, feed_all};
+use isoscope_scene::{
+    EXTENT, POINTS, QEMU_FRAMES, SLICE_BYTES, SURFACE_BYTES, boot_frames, engine_config, feed_all,
+};
 use std::fmt::Write as _;
 use std::io::{Read, Write as _};
 use std::net::TcpStream;
@@ -163,7 +165,7 @@ fn decode(log: &str, blank: &BlankPin) -> Result<Vec<Sample>, String> {
 }
 
 /// The firmware's engine memory, on the heap.
-type Memory = StaticBuffers<SLICE_BYTES, EXTENT, POINTS, KINDS>;
+type Memory = StaticBuffers<SLICE_BYTES, EXTENT, SURFACE_BYTES>;
 
 /// What drawing the boot picture did.
 struct Boot {

@@ -18,7 +18,7 @@
 #![deny(clippy::panic, clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 
 use isoscope_core::demo::Demo;
-use isoscope_core::engine::{Engine, EngineConfig};
+use isoscope_core::engine::{Engine, EngineConfig, Geometry};
 use isoscope_core::wire::{
     AXIS_X, AXIS_Y, AXIS_Z, Levels, MAX_FRAME_LEN, Message, SampleType, WireError, encode,
 };
@@ -43,8 +43,9 @@ pub const EXTENT: usize = 128;
 /// surfaces take 102,400 bytes of SRAM. The boot scene has 936 (after
 /// stitching).
 pub const POINTS: usize = 8192;
-/// Bytes of the kinds of [`POINTS`] points (2 bits each).
-pub const KINDS: usize = POINTS.div_ceil(4);
+/// Bytes of each surface: [`POINTS`] points of 6 bytes and their kinds
+/// (2 bits each).
+pub const SURFACE_BYTES: usize = Geometry::bytes_for(POINTS);
 
 /// Frames the firmware plays under QEMU for each picture it checks (the
 /// boot picture, then the first volume received).
