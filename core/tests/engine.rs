@@ -5,7 +5,7 @@
 use isoscope_core::command::{Command, Point3};
 use isoscope_core::demo::Demo;
 use isoscope_core::display::OptimizeConfig;
-use isoscope_core::engine::{AbortReason, Buffers, Engine, EngineConfig, Event, Geometry};
+use isoscope_core::engine::{AbortReason, Buffers, Engine, EngineConfig, Event, Geometry, Packed};
 use isoscope_core::grid::{Planes, Volume};
 use isoscope_core::surface::{SliceId, SurfaceSink, contour_slice, contour_volume};
 use isoscope_core::trace::Traversal;
@@ -18,6 +18,7 @@ use proptest::prelude::*;
 #[path = "common/segments.rs"]
 mod segments;
 use segments::{Seg, segments};
+use std::collections::HashSet;
 use std::convert::Infallible;
 
 /// Engine memory on the heap, for tests.
@@ -748,6 +749,70 @@ fn a_surface_larger_than_memory_is_cut_and_counted() {
     assert!(dropped > 1000, "{dropped}");
     e.update(0);
     assert!(e.commands().next().is_some());
+}
+
+/// The hydrogen orbital at 32^3 and the CLI's level: 12,816 points as
+/// contoured, 7,308 once stitched and merged.
+fn hydrogen32() -> Vol {
+    Vol { levels: vec![0.1], ..Vol::demo(Demo::Hydrogen, 32, SampleType::F32) }
+}
+
+/// The vertices a picture draws.
+fn vertices(e: &Engine<'_>) -> HashSet<Packed> {
+    shown(e).into_iter().flat_map(|(a, b)| [a, b]).collect()
+}
+
+/// The length a picture draws, in codes.
+fn drawn_length(e: &Engine<'_>) -> f64 {
+    let d = |a: Packed, b: Packed| {
+        a.iter().zip(b).map(|(&a, b)| (f64::from(a) - f64::from(b)).powi(2)).sum::<f64>().sqrt()
+    };
+    shown(e).into_iter().map(|(a, b)| d(a, b)).sum()
+}
+
+#[test]
+fn pieces_more_than_the_front_holds_fit_it_once_stitched_and_merged() {
+    let v = hydrogen32();
+    // Plenty of memory: merged in the order pass.
+    let mut mem = big();
+    let mut whole = Engine::new(EngineConfig::default(), mem.buffers()).unwrap();
+    whole.feed(&Host::new().volume(&v), 0);
+    whole.update(0);
+    // A front of 8,192 points, a back of twice that: the 12,816 pieces fit
+    // the back, their 9,088 points stitched but unmerged would not fit the
+    // front.
+    let (mut slices, mut rows) = (vec![0u8; 2 * 64 * 64 * 4], vec![0f32; 2 * 64]);
+    let (mut front, mut back) = (vec![0u8; Geometry::bytes_for(8192)], vec![0u8; Geometry::bytes_for(16384)]);
+    let mut scratch = vec![0u8; 8 * 16384];
+    let (r0, r1) = rows.split_at_mut(64);
+    let buffers = Buffers {
+        slices: &mut slices,
+        rows: [r0, r1],
+        front: &mut front,
+        back: &mut back,
+        scratch: &mut scratch,
+    };
+    let mut e = Engine::new(EngineConfig::default(), buffers).unwrap();
+    e.feed(&Host::new().volume(&v), 0);
+    let ev = events(&mut e);
+    assert!(
+        ev.contains(&Event::Committed { dims: [32; 3], commands: 12816, dropped: 0, nonfinite_cells: 0 }),
+        "{ev:?}"
+    );
+    e.update(0);
+    let (st, all) = (e.chain_stats(), whole.chain_stats());
+    assert_eq!(st.points_in, 12816);
+    assert!(st.ordered);
+    assert!(st.points_out <= 8192, "{st:?}");
+    // The same surface, merged alike: within a few points and polylines
+    // (merging first leaves a vertex where two loops touch less often), a
+    // subset of the contour's vertices, and as long.
+    assert!(st.points_out.abs_diff(all.points_out) <= all.points_out / 100, "{st:?} {all:?}");
+    assert!(st.polylines.abs_diff(all.polylines) <= all.polylines / 10, "{st:?} {all:?}");
+    let contour: HashSet<Packed> = batch(&v).into_iter().flat_map(|(a, b)| [a, b]).collect();
+    assert!(vertices(&e).is_subset(&contour));
+    let (a, b) = (drawn_length(&e), drawn_length(&whole));
+    assert!((a - b).abs() <= b * 1e-3, "{a} {b}");
 }
 
 #[test]

@@ -12,8 +12,10 @@
 //!    shared edges are bit-identical), the straightest one first.
 //! 2. [`Pass::Order`]: from where the beam stands, the nearest polyline end
 //!    (or, for a closed loop, the nearest of its vertices: a loop is entered
-//!    anywhere) is drawn next; runs of nearly collinear points are merged
-//!    on the way.
+//!    anywhere) is drawn next.
+//!
+//! Either pass merges runs of nearly collinear points on the way, as told
+//! (the engine merges in one of them: see `Engine::commit`).
 //!
 //! The order is made in voxel space, once per volume: any view then draws it
 //! with no more blanked travel than the 3D tour, scaled (a projection never
@@ -495,9 +497,9 @@ impl<'s, 'g, 'a> Index<'s, 'g, 'a> {
     }
 }
 
-/// Chains `src` into `dst` (reset to `src`'s scale) as `pass` says; in the
-/// order pass, runs of points within `tolerance` voxels of their chord are
-/// merged (0: none). `start` is where the beam comes from. `scratch` should
+/// Chains `src` into `dst` (reset to `src`'s scale) as `pass` says; runs
+/// of points within `tolerance` voxels of their chord are merged (0:
+/// none). `start` is where the beam comes from. `scratch` should
 /// hold about 7 bytes a point; with less, the fragments are copied as they
 /// are.
 pub(crate) fn chain(
@@ -530,8 +532,7 @@ fn chain_on(
     };
     stats.fragments = x.frags as u32;
     stats.ordered = true;
-    let tol = if pass == Pass::Order { tolerance } else { 0.0 };
-    let mut walk = Walk { out: Out::new(tol, src.shift()), cur: start, prev: None };
+    let mut walk = Walk { out: Out::new(tolerance, src.shift()), cur: start, prev: None };
     match pass {
         Pass::Order => {
             // The tour: nearest neighbour, then 2-opt, then each loop entered

@@ -594,9 +594,16 @@ impl<'a> Engine<'a> {
         let scratch = if slices.len() >= self.scratch.len() { slices } else { &mut *self.scratch };
         // Stitch the fragments into maximal polylines (into the front),
         // then order those for short jumps (back into the back), and make
-        // that the front.
-        let stitched = chain::chain(&self.back, &mut self.front, scratch, [0; 3], 0.0, Pass::Stitch);
-        let ordered = chain::chain(&self.front, &mut self.back, scratch, [0; 3], tolerance, Pass::Order);
+        // that the front. Collinear runs are merged once: in the order
+        // pass, which then also joins polylines that touch where one ends
+        // and the next is entered (merging first could take such a vertex
+        // away); but in the stitch pass when the pieces are more than the
+        // front holds (stitching joins them, merging thins them: the
+        // surface fits again).
+        let merge_first = self.back.len() > self.front.capacity();
+        let (first, then) = if merge_first { (tolerance, 0.0) } else { (0.0, tolerance) };
+        let stitched = chain::chain(&self.back, &mut self.front, scratch, [0; 3], first, Pass::Stitch);
+        let ordered = chain::chain(&self.front, &mut self.back, scratch, [0; 3], then, Pass::Order);
         core::mem::swap(&mut self.front, &mut self.back);
         self.back.reset(self.back.shift());
         self.chain = ChainStats {
@@ -605,6 +612,7 @@ impl<'a> Engine<'a> {
             ordered: stitched.ordered && ordered.ordered,
             duplicate_segments: stitched.duplicate_segments,
             culled_dots: stitched.culled_dots,
+            merged: stitched.merged + ordered.merged,
             ..ordered
         };
         if let Some(s) = dev.shown.as_mut() {
