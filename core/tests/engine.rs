@@ -5,7 +5,9 @@
 use isoscope_core::command::{Command, Point3};
 use isoscope_core::demo::Demo;
 use isoscope_core::display::OptimizeConfig;
-use isoscope_core::engine::{AbortReason, Buffers, Engine, EngineConfig, Event, Geometry, Packed};
+use isoscope_core::engine::{
+    AbortReason, Buffers, Engine, EngineConfig, Event, Geometry, Packed, StaticBuffers,
+};
 use isoscope_core::grid::{Planes, Volume};
 use isoscope_core::surface::{SliceId, SurfaceSink, contour_slice, contour_volume};
 use isoscope_core::trace::Traversal;
@@ -770,35 +772,20 @@ fn drawn_length(e: &Engine<'_>) -> f64 {
     shown(e).into_iter().map(|(a, b)| d(a, b)).sum()
 }
 
-#[test]
-fn pieces_more_than_the_front_holds_fit_it_once_stitched_and_merged() {
+/// Hydrogen 32^3 in `buffers` must show whole: its 12,816 pieces kept (in
+/// the back, and what spills into the slice memory), stitched and merged
+/// into a front of 8,192 points, as long as with plenty of memory.
+fn shows_hydrogen32_whole(buffers: Buffers<'_>) {
     let v = hydrogen32();
-    // Plenty of memory: merged in the order pass.
     let mut mem = big();
     let mut whole = Engine::new(EngineConfig::default(), mem.buffers()).unwrap();
     whole.feed(&Host::new().volume(&v), 0);
     whole.update(0);
-    // A front of 8,192 points, a back of twice that: the 12,816 pieces fit
-    // the back, their 9,088 points stitched but unmerged would not fit the
-    // front.
-    let (mut slices, mut rows) = (vec![0u8; 2 * 64 * 64 * 4], vec![0f32; 2 * 64]);
-    let (mut front, mut back) = (vec![0u8; Geometry::bytes_for(8192)], vec![0u8; Geometry::bytes_for(16384)]);
-    let mut scratch = vec![0u8; 8 * 16384];
-    let (r0, r1) = rows.split_at_mut(64);
-    let buffers = Buffers {
-        slices: &mut slices,
-        rows: [r0, r1],
-        front: &mut front,
-        back: &mut back,
-        scratch: &mut scratch,
-    };
     let mut e = Engine::new(EngineConfig::default(), buffers).unwrap();
     e.feed(&Host::new().volume(&v), 0);
     let ev = events(&mut e);
-    assert!(
-        ev.contains(&Event::Committed { dims: [32; 3], commands: 12816, dropped: 0, nonfinite_cells: 0 }),
-        "{ev:?}"
-    );
+    let committed = Event::Committed { dims: [32; 3], commands: 12816, dropped: 0, nonfinite_cells: 0 };
+    assert!(ev.contains(&committed), "{ev:?}");
     e.update(0);
     let (st, all) = (e.chain_stats(), whole.chain_stats());
     assert_eq!(st.points_in, 12816);
@@ -813,6 +800,73 @@ fn pieces_more_than_the_front_holds_fit_it_once_stitched_and_merged() {
     assert!(vertices(&e).is_subset(&contour));
     let (a, b) = (drawn_length(&e), drawn_length(&whole));
     assert!((a - b).abs() <= b * 1e-3, "{a} {b}");
+}
+
+#[test]
+fn pieces_more_than_the_front_holds_fit_it_once_stitched_and_merged() {
+    // A front of 8,192 points, a back of twice that: the 12,816 pieces fit
+    // the back, their 9,088 points stitched but unmerged would not fit the
+    // front.
+    let (mut slices, mut rows) = (vec![0u8; 2 * 64 * 64 * 4], vec![0f32; 2 * 64]);
+    let (mut front, mut back) = (vec![0u8; Geometry::bytes_for(8192)], vec![0u8; Geometry::bytes_for(16384)]);
+    let mut scratch = vec![0u8; 8 * 16384];
+    let (r0, r1) = rows.split_at_mut(64);
+    shows_hydrogen32_whole(Buffers {
+        slices: &mut slices,
+        rows: [r0, r1],
+        front: &mut front,
+        back: &mut back,
+        scratch: &mut scratch,
+    });
+}
+
+#[test]
+fn pieces_more_than_the_back_holds_spill_into_the_slice_memory_small_slices_leave() {
+    // The firmware's memory: slices of 32 KB, surfaces of 8,192 points, no
+    // more scratch. Hydrogen's 32 x 32 f32 slices take 8 KB of the 64:
+    // 4,624 of its pieces go into the rest, and stitching finds its index
+    // room beside them.
+    let mut mem = Box::new(StaticBuffers::<{ 32 * 1024 }, 128, { Geometry::bytes_for(8192) }>::new());
+    shows_hydrogen32_whole(mem.buffers());
+}
+
+#[test]
+fn a_spill_leaves_nothing_behind() {
+    // In the firmware's memory: hydrogen 32^3 spills; then a transfer of it
+    // spills and is abandoned half way (superseded); then a small volume
+    // shows exactly as it does in a fresh engine, and the spilled picture
+    // stays on screen until it does.
+    type Fw = StaticBuffers<{ 32 * 1024 }, 128, { Geometry::bytes_for(8192) }>;
+    let (h, small) = (hydrogen32(), Vol::demo(Demo::Gyroid, 20, SampleType::U16));
+    let mut fresh = Box::new(Fw::new());
+    let mut f = Engine::new(EngineConfig::default(), fresh.buffers()).unwrap();
+    f.feed(&Host::new().volume(&small), 0);
+    f.update(0);
+    let mut mem = Box::new(Fw::new());
+    let mut e = Engine::new(EngineConfig::default(), mem.buffers()).unwrap();
+    let mut host = Host::new();
+    e.feed(&host.volume(&h), 0);
+    e.update(0);
+    assert_eq!(e.chain_stats().points_in, 12816);
+    let spilled = picture(&e);
+    answers(&mut e);
+    // 28 of the 32 slices: some 10,000 pieces, the back full.
+    let mut half = vec![host.begin(&h)];
+    half.extend(host.first_slices(&h, MAX_CHUNK, 28 * h.slice_bytes().div_ceil(MAX_CHUNK)));
+    let mut acks = 0;
+    for frame in &half {
+        e.feed(frame, 10);
+        acks += answers(&mut e).iter().filter(|m| matches!(m, Message::Ack { .. })).count();
+    }
+    assert_eq!(acks, half.len());
+    e.update(10);
+    assert_eq!(picture(&e), spilled);
+    e.feed(&host.begin(&small), 20);
+    e.feed(&host.slices(&small, MAX_CHUNK).concat(), 20);
+    e.feed(&host.end(), 20);
+    e.update(20);
+    assert_eq!(picture(&e), picture(&f));
+    assert_eq!(e.chain_stats(), f.chain_stats());
 }
 
 #[test]

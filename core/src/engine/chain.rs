@@ -30,7 +30,7 @@
 //! rings of the beam, else the next non-empty cell in scan order (a cursor
 //! that only moves on, `O(cells)` in all).
 
-use super::geometry::{Geometry, Kind, Packed};
+use super::geometry::{Geometry, Kind, Packed, Source};
 use crate::fastmath::sqrt;
 
 /// No entry.
@@ -191,8 +191,8 @@ fn cell_coords(q: Packed, n: [u32; 3], bits: u32) -> [u32; 3] {
 /// The fragments of a geometry and a grid of their ends. An end is a point
 /// index: the first and last point of an open fragment, the point of a dot,
 /// every vertex of a closed loop (in the order pass).
-struct Index<'s, 'g, 'a> {
-    src: &'g Geometry<'a>,
+struct Index<'s, 'g> {
+    src: Source<'g>,
     w: Words<'s>,
     /// Cells along x, y, z; a cell is `2^bits` codes on a side.
     n: [u32; 3],
@@ -212,8 +212,8 @@ struct Index<'s, 'g, 'a> {
     buckets: usize,
 }
 
-impl<'s, 'g, 'a> Index<'s, 'g, 'a> {
-    fn build(src: &'g Geometry<'a>, scratch: &'s mut [u8], any_vertex: bool, hashed: bool) -> Option<Self> {
+impl<'s, 'g> Index<'s, 'g> {
+    fn build(src: Source<'g>, scratch: &'s mut [u8], any_vertex: bool, hashed: bool) -> Option<Self> {
         let points = src.len();
         let mut frags = 0usize;
         let mut top = [0u16; 3];
@@ -548,7 +548,7 @@ impl<'s, 'g, 'a> Index<'s, 'g, 'a> {
 /// hold about 7 bytes a point; with less, the fragments are copied as they
 /// are.
 pub(crate) fn chain(
-    src: &Geometry<'_>,
+    src: Source<'_>,
     dst: &mut Geometry<'_>,
     scratch: &mut [u8],
     start: Packed,
@@ -561,7 +561,7 @@ pub(crate) fn chain(
 /// [`chain`], with the stitch pass's ends in hashed buckets or (`hashed`
 /// false, for the test that both stitch alike) in the grid of cells.
 fn chain_on(
-    src: &Geometry<'_>,
+    src: Source<'_>,
     dst: &mut Geometry<'_>,
     scratch: &mut [u8],
     start: Packed,
@@ -640,7 +640,7 @@ fn chain_on(
 }
 
 /// Copy `src` as it is.
-fn copy(src: &Geometry<'_>, dst: &mut Geometry<'_>, stats: &mut ChainStats) {
+fn copy(src: Source<'_>, dst: &mut Geometry<'_>, stats: &mut ChainStats) {
     for i in 0..src.len() {
         if let Some((q, kind)) = src.get(i) {
             dst.push_raw(q, kind);
@@ -651,7 +651,7 @@ fn copy(src: &Geometry<'_>, dst: &mut Geometry<'_>, stats: &mut ChainStats) {
 }
 
 /// The point where the beam leaves fragment `f` entered at point `end`.
-fn exit(x: &Index<'_, '_, '_>, f: usize, end: usize) -> usize {
+fn exit(x: &Index<'_, '_>, f: usize, end: usize) -> usize {
     let (from, to) = x.span(f);
     if x.is_loop(f) {
         end
@@ -675,7 +675,7 @@ struct Tour {
 const TOUR_WORDS: usize = 3;
 
 impl Tour {
-    fn push(&mut self, x: &mut Index<'_, '_, '_>, f: usize, end: usize) {
+    fn push(&mut self, x: &mut Index<'_, '_>, f: usize, end: usize) {
         let out = exit(x, f, end);
         self.set(&mut x.w, self.len, end, out);
         self.len += 1;
@@ -702,13 +702,13 @@ impl Tour {
     }
 
     /// Where step `k` is entered and left.
-    fn ends(&self, x: &Index<'_, '_, '_>, k: usize) -> (Packed, Packed) {
+    fn ends(&self, x: &Index<'_, '_>, k: usize) -> (Packed, Packed) {
         let (entry, exit) = self.get(&x.w, k);
         (x.point(entry), x.point(exit))
     }
 
     /// Measure the jump from step `k` to step `k + 1`.
-    fn measure(&self, x: &mut Index<'_, '_, '_>, k: usize) {
+    fn measure(&self, x: &mut Index<'_, '_>, k: usize) {
         let jump = length(self.ends(x, k).1, self.ends(x, k + 1).0);
         self.set_jump(&mut x.w, k, jump);
     }
@@ -722,7 +722,7 @@ impl Tour {
     /// shorter than the two old ones is turned down without a square root:
     /// the same moves as measuring every jump afresh, at a fraction of the
     /// cost.
-    fn two_opt(&self, x: &mut Index<'_, '_, '_>) {
+    fn two_opt(&self, x: &mut Index<'_, '_>) {
         let n = self.len;
         if n < 3 {
             return;
@@ -774,7 +774,7 @@ impl Tour {
     /// Reverse steps `a..=b`, each drawn the other way (entry and exit
     /// swapped), and the jumps between them (a length reads the same both
     /// ways).
-    fn reverse(&self, x: &mut Index<'_, '_, '_>, a: usize, b: usize) {
+    fn reverse(&self, x: &mut Index<'_, '_>, a: usize, b: usize) {
         let (mut lo, mut hi) = (a, b);
         while lo <= hi {
             let (ea, xa) = self.get(&x.w, lo);
@@ -798,7 +798,7 @@ impl Tour {
     }
 
     /// Enter each closed loop at the vertex nearest the jumps around it.
-    fn best_entries(&self, x: &mut Index<'_, '_, '_>, start: Packed) {
+    fn best_entries(&self, x: &mut Index<'_, '_>, start: Packed) {
         let mut prev = start;
         for k in 0..self.len {
             let (end, _) = self.get(&x.w, k);
@@ -836,7 +836,7 @@ impl Walk {
     /// jump.
     fn take(
         &mut self,
-        x: &mut Index<'_, '_, '_>,
+        x: &mut Index<'_, '_>,
         dst: &mut Geometry<'_>,
         end: usize,
         join: bool,
@@ -850,7 +850,7 @@ impl Walk {
     /// Draw fragment `f` (already taken) entering at `end`.
     fn emit(
         &mut self,
-        x: &Index<'_, '_, '_>,
+        x: &Index<'_, '_>,
         dst: &mut Geometry<'_>,
         f: usize,
         end: usize,
@@ -861,7 +861,7 @@ impl Walk {
 
     fn draw(
         &mut self,
-        x: &Index<'_, '_, '_>,
+        x: &Index<'_, '_>,
         dst: &mut Geometry<'_>,
         f: usize,
         end: usize,
@@ -1023,7 +1023,7 @@ mod tests {
     /// 2-opt as it was before the lengths were kept: every jump measured
     /// afresh, every candidate's two new jumps computed. The oracle of
     /// `two_opt_keeps_lengths_without_changing_a_move`.
-    fn two_opt_afresh(tour: &Tour, x: &mut Index<'_, '_, '_>) {
+    fn two_opt_afresh(tour: &Tour, x: &mut Index<'_, '_>) {
         let n = tour.len;
         let mut budget: u64 = 8 * WINDOW as u64 * n as u64;
         let (mut improved, mut passes) = (true, 0);
@@ -1100,7 +1100,7 @@ mod tests {
                 }
             }
             let mut scratch = vec![0u8; 16 * points + 4096];
-            let mut x = Index::build(&src, &mut scratch, false, true).expect("room");
+            let mut x = Index::build(Source::one(&src), &mut scratch, false, true).expect("room");
             for f in (0..lens.len()).step_by(3) {
                 x.take(f);
             }
@@ -1138,7 +1138,7 @@ mod tests {
             let mut tours = Vec::new();
             for afresh in [false, true] {
                 let mut scratch = vec![0u8; 64 * 1024];
-                let mut x = Index::build(&src, &mut scratch, true, false).expect("room");
+                let mut x = Index::build(Source::one(&src), &mut scratch, true, false).expect("room");
                 let mut tour = Tour { base: x.links + src.len(), len: 0 };
                 for f in 0..x.frags {
                     let end = x.span(f).0;
@@ -1180,7 +1180,7 @@ mod tests {
             let frags = (0..src.len()).filter(|&i| src.kind(i).is_some_and(Kind::starts)).count();
             let tight = 2 * (frags + src.len() + frags);
             proptest::prop_assert!(matches!(
-                Index::build(&src, &mut vec![0u8; tight], false, true).map(|x| x.w),
+                Index::build(Source::one(&src), &mut vec![0u8; tight], false, true).map(|x| x.w),
                 Some(Words::Narrow(_))
             ));
             let mut out = Vec::new();
@@ -1188,7 +1188,7 @@ mod tests {
                 let mut p2 = store(512);
                 let mut dst = Geometry::new(&mut p2);
                 let mut scratch = vec![0u8; bytes];
-                let st = chain_on(&src, &mut dst, &mut scratch, [0; 3], 0.0, Pass::Stitch, hashed);
+                let st = chain_on(Source::one(&src), &mut dst, &mut scratch, [0; 3], 0.0, Pass::Stitch, hashed);
                 proptest::prop_assert!(st.ordered);
                 out.push((dst.commands().collect::<Vec<_>>(), st.polylines, st.culled_dots, st.duplicate_segments));
             }
@@ -1210,7 +1210,7 @@ mod tests {
         let mut p2 = store(16);
         let mut dst = Geometry::new(&mut p2);
         let mut scratch = [0u8; 256];
-        let st = chain(&src, &mut dst, &mut scratch, [0; 3], 0.0, Pass::Order);
+        let st = chain(Source::one(&src), &mut dst, &mut scratch, [0; 3], 0.0, Pass::Order);
         assert!(st.ordered);
         assert_eq!((st.fragments, st.polylines, st.loops, st.points_out), (4, 1, 1, 4));
         assert_eq!(st.travel, 0.0);
@@ -1231,9 +1231,9 @@ mod tests {
         let mut p2 = store(16);
         let mut dst = Geometry::new(&mut p2);
         let mut scratch = [0u8; 256];
-        let st = chain(&src, &mut dst, &mut scratch, [0; 3], 0.01, Pass::Order);
+        let st = chain(Source::one(&src), &mut dst, &mut scratch, [0; 3], 0.01, Pass::Order);
         assert_eq!((st.polylines, st.merged, st.points_out), (1, 1, 3));
-        let st = chain(&src, &mut dst, &mut scratch, [0; 3], 0.0, Pass::Order);
+        let st = chain(Source::one(&src), &mut dst, &mut scratch, [0; 3], 0.0, Pass::Order);
         assert_eq!((st.merged, st.points_out), (0, 4));
     }
 
@@ -1246,7 +1246,7 @@ mod tests {
         seg(&mut src, [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]);
         let mut p2 = store(16);
         let mut dst = Geometry::new(&mut p2);
-        let st = chain(&src, &mut dst, &mut [0u8; 8], [0; 3], 0.0, Pass::Order);
+        let st = chain(Source::one(&src), &mut dst, &mut [0u8; 8], [0; 3], 0.0, Pass::Order);
         assert!(!st.ordered);
         let a: Vec<_> = src.commands().collect();
         let b: Vec<_> = dst.commands().collect();

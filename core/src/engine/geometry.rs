@@ -286,6 +286,128 @@ impl<'a> Geometry<'a> {
     }
 }
 
+/// What a [`Geometry`] holds besides its bytes: to lend a store the same
+/// bytes again later ([`Geometry::held`], [`Geometry::lent`]), as the
+/// stream does with the part of a surface that spills into the idle slice
+/// memory.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub(crate) struct Held {
+    len: usize,
+    dropped: u32,
+    broken: bool,
+    shift: u8,
+}
+
+impl Held {
+    /// An empty store at `shift`.
+    pub(crate) fn empty(shift: u8) -> Self {
+        Self { shift: shift.min(12), ..Self::default() }
+    }
+
+    /// Points held.
+    pub(crate) fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Commands refused.
+    pub(crate) fn dropped(&self) -> u32 {
+        self.dropped
+    }
+}
+
+impl<'a> Geometry<'a> {
+    /// What it holds, to lend its bytes again with [`Geometry::lent`].
+    pub(crate) fn held(&self) -> Held {
+        Held { len: self.len, dropped: self.dropped, broken: self.broken, shift: self.shift }
+    }
+
+    /// The store `held` describes, over the same bytes it was taken from
+    /// (or a copy of them: [`Geometry::move_to_front`]).
+    pub(crate) fn lent(bytes: &'a mut [u8], held: Held) -> Self {
+        let mut g = Self::new(bytes);
+        g.len = held.len.min(g.capacity());
+        g.dropped = held.dropped;
+        g.broken = held.broken;
+        g.shift = held.shift.min(12);
+        g
+    }
+
+    /// Move the store lent `bytes[at..]` and holding `held` to the start
+    /// of `bytes`, in as few bytes as it needs: it is then
+    /// `Geometry::lent(&mut bytes[..Geometry::bytes_for(held.len())], held)`
+    /// and the rest of `bytes` is free.
+    pub(crate) fn move_to_front(bytes: &mut [u8], at: usize, held: Held) -> Held {
+        let n = Self::points_in(bytes.len().saturating_sub(at));
+        let len = held.len.min(n);
+        let kinds = at + 6 * n;
+        // Points first: they move down by `at` at least, past nothing the
+        // kinds still need (those lie after all `n` points).
+        if kinds + len.div_ceil(4) > bytes.len() {
+            return Held::empty(held.shift);
+        }
+        bytes.copy_within(at..at + 6 * len, 0);
+        bytes.copy_within(kinds..kinds + len.div_ceil(4), 6 * len);
+        Held { len, ..held }
+    }
+}
+
+/// The points of a surface in one or two stores, as one sequence: all of
+/// the first, then all of the second (the part that spilled).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Source<'g> {
+    head: &'g Geometry<'g>,
+    tail: Option<&'g Geometry<'g>>,
+}
+
+impl<'g> Source<'g> {
+    /// One store.
+    pub(crate) fn one(g: &'g Geometry<'g>) -> Self {
+        Self { head: g, tail: None }
+    }
+
+    /// `head`'s points, then `tail`'s.
+    pub(crate) fn two(head: &'g Geometry<'g>, tail: &'g Geometry<'g>) -> Self {
+        Self { head, tail: Some(tail) }
+    }
+
+    /// Points in all.
+    pub(crate) fn len(&self) -> usize {
+        self.head.len() + self.tail.map_or(0, Geometry::len)
+    }
+
+    /// The fixed point shift (the first store's: both have the volume's).
+    pub(crate) fn shift(&self) -> u8 {
+        self.head.shift()
+    }
+
+    /// Point `i` and its kind.
+    #[inline]
+    pub(crate) fn get(&self, i: usize) -> Option<(Packed, Kind)> {
+        match i.checked_sub(self.head.len()) {
+            None => self.head.get(i),
+            Some(j) => self.tail?.get(j),
+        }
+    }
+
+    /// Point `i` alone.
+    #[inline]
+    pub(crate) fn point_at(&self, i: usize) -> Option<Packed> {
+        match i.checked_sub(self.head.len()) {
+            None => self.head.point_at(i),
+            Some(j) => self.tail?.point_at(j),
+        }
+    }
+
+    /// The kind of point `i` alone.
+    #[inline]
+    pub(crate) fn kind(&self, i: usize) -> Option<Kind> {
+        match i.checked_sub(self.head.len()) {
+            None => self.head.kind(i),
+            Some(j) => self.tail?.kind(j),
+        }
+    }
+}
+
 /// A point as its 6 stored bytes.
 #[inline]
 fn pack([x, y, z]: Packed) -> [u8; 6] {
@@ -407,6 +529,47 @@ mod tests {
         g.reset(4);
         assert!(g.is_empty());
         assert_eq!(g.dropped(), 0);
+    }
+
+    #[test]
+    fn a_store_moved_to_the_front_holds_what_it_held() {
+        let kinds = [Kind::Move, Kind::Line, Kind::Dot, Kind::Loop, Kind::Line];
+        for at in [0, 1, 37, 60] {
+            for n in 0..=kinds.len() {
+                let mut bytes: Vec<u8> = (0..200u8).collect();
+                let mut g = Geometry::lent(&mut bytes[at..], Held::empty(5));
+                for (i, &k) in kinds.iter().take(n).enumerate() {
+                    assert!(g.push_raw([i as u16, 1000 + i as u16, 0xFFFF - i as u16], k));
+                }
+                let want: Vec<_> = (0..n).map(|i| g.get(i)).collect();
+                let held = g.held();
+                let held = Geometry::move_to_front(&mut bytes, at, held);
+                assert_eq!(held, Held { len: n, dropped: 0, broken: false, shift: 5 });
+                let g = Geometry::lent(&mut bytes[..Geometry::bytes_for(n)], held);
+                assert_eq!((0..n).map(|i| g.get(i)).collect::<Vec<_>>(), want, "at {at}, {n} points");
+                assert_eq!(g.shift(), 5);
+            }
+        }
+        // A store that cannot be where it is said to be holds nothing.
+        let mut bytes = [0u8; 10];
+        assert_eq!(Geometry::move_to_front(&mut bytes, 20, Held { len: 3, ..Held::empty(2) }).len(), 0);
+    }
+
+    #[test]
+    fn two_stores_read_as_one() {
+        let (mut a, mut b) = (store(2), store(3));
+        let (mut g, mut h) = (Geometry::new(&mut a), Geometry::new(&mut b));
+        assert!(g.push_raw([1; 3], Kind::Move) && g.push_raw([2; 3], Kind::Line));
+        assert!(h.push_raw([3; 3], Kind::Line) && h.push_raw([4; 3], Kind::Dot));
+        let s = Source::two(&g, &h);
+        assert_eq!(s.len(), 4);
+        let got: Vec<_> = (0..5).map(|i| (s.get(i), s.point_at(i), s.kind(i))).collect();
+        assert_eq!(got[1], (Some(([2; 3], Kind::Line)), Some([2; 3]), Some(Kind::Line)));
+        assert_eq!(got[2], (Some(([3; 3], Kind::Line)), Some([3; 3]), Some(Kind::Line)));
+        assert_eq!(got[3], (Some(([4; 3], Kind::Dot)), Some([4; 3]), Some(Kind::Dot)));
+        assert_eq!(got[4], (None, None, None));
+        assert_eq!(Source::one(&g).len(), 2);
+        assert_eq!(Source::one(&g).get(2), None);
     }
 
     #[test]

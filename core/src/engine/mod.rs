@@ -12,7 +12,8 @@
 //! - keeps two surfaces in voxel coordinates ([`Geometry`], 6.25 bytes a
 //!   point): the picture on screen, untouched until a new volume is
 //!   complete (so an aborted, corrupt or abandoned transfer never costs it),
-//!   and the one being received;
+//!   and the one being received (whose pieces go on, once it is full, in
+//!   the slice memory the volume's slices leave free);
 //! - when a volume is complete, stitches and orders it in 3D into the
 //!   picture ([`ChainStats`]; the idle slice buffers are the scratch), so
 //!   that any view draws it with short jumps: a new view, or a spinning
@@ -38,6 +39,7 @@ mod stream;
 
 pub use chain::ChainStats;
 use chain::Pass;
+use geometry::Source;
 pub use geometry::{Commands, Geometry, Kind, Packed};
 pub use session::REPLAY;
 pub use stream::VolumeSpec;
@@ -64,11 +66,14 @@ pub const EVENT_QUEUE: usize = 16;
 /// The engine's memory, lent by the caller.
 ///
 /// - `slices`: both slice buffers, one after the other: half of it is the
-///   largest slice, `nx * ny * sample size` bytes. Between volumes it is
-///   the scratch for stitching and ordering, which takes about 6 bytes a
-///   point of the surface (14 a fragment): so the slices should hold at
-///   least `6 * points` bytes in all, or a large surface is shown
-///   unordered.
+///   largest slice, `nx * ny * sample size` bytes. What a volume's two
+///   slices leave free holds the part of its surface that does not fit
+///   `back` (so a volume of small slices may have a larger surface: the
+///   pieces as contoured are some 1.75 times the picture's points).
+///   Between volumes it is the scratch for stitching and ordering, which
+///   takes about 6 bytes a point of the surface (14 a fragment), 3 when
+///   short of room: so the slices should hold at least `6 * points` bytes
+///   in all, or a large surface is shown unordered.
 /// - `rows`: two row buffers; each sets the largest `nx` and `ny`.
 /// - `front`, `back`: the bytes of the two surfaces (on screen, being
 ///   received), [`Geometry::bytes_for`] the points each holds (6.25 bytes
@@ -590,20 +595,25 @@ impl<'a> Engine<'a> {
                 let side = spec.spacing.iter().fold(0.0f32, |m, &s| m.max(s));
                 dev.cfg.optimize.tolerance / (2.0 * t.scale() * side)
             });
+        // Stitch the pieces (the back's, then those that spilled into the
+        // slice memory) into maximal polylines (into the front), then order
+        // those for short jumps (back into the back), and make that the
+        // front. Collinear runs are merged once: in the order pass, which
+        // then also joins polylines that touch where one ends and the next
+        // is entered (merging first could take such a vertex away); but in
+        // the stitch pass when the pieces are more than the front holds
+        // (stitching joins them, merging thins them: the surface fits
+        // again).
+        let (spill, free) = dev.stream.take_spill();
+        let pieces = Source::two(&self.back, &spill);
+        let merge_first = pieces.len() > self.front.capacity();
+        let (first, then) = if merge_first { (tolerance, 0.0) } else { (0.0, tolerance) };
+        let scratch = if free.len() >= self.scratch.len() { free } else { &mut *self.scratch };
+        let stitched = chain::chain(pieces, &mut self.front, scratch, [0; 3], first, Pass::Stitch);
         let slices = dev.stream.idle_scratch().unwrap_or(&mut []);
         let scratch = if slices.len() >= self.scratch.len() { slices } else { &mut *self.scratch };
-        // Stitch the fragments into maximal polylines (into the front),
-        // then order those for short jumps (back into the back), and make
-        // that the front. Collinear runs are merged once: in the order
-        // pass, which then also joins polylines that touch where one ends
-        // and the next is entered (merging first could take such a vertex
-        // away); but in the stitch pass when the pieces are more than the
-        // front holds (stitching joins them, merging thins them: the
-        // surface fits again).
-        let merge_first = self.back.len() > self.front.capacity();
-        let (first, then) = if merge_first { (tolerance, 0.0) } else { (0.0, tolerance) };
-        let stitched = chain::chain(&self.back, &mut self.front, scratch, [0; 3], first, Pass::Stitch);
-        let ordered = chain::chain(&self.front, &mut self.back, scratch, [0; 3], then, Pass::Order);
+        let ordered =
+            chain::chain(Source::one(&self.front), &mut self.back, scratch, [0; 3], then, Pass::Order);
         core::mem::swap(&mut self.front, &mut self.back);
         self.back.reset(self.back.shift());
         self.chain = ChainStats {
@@ -956,8 +966,9 @@ impl Device<'_> {
                     return Err(NackCode::Invalid);
                 }
                 spec.check(self.stream.slice_capacity(), self.stream.row_capacity())?;
-                back.reset(Geometry::shift_for(dims));
-                self.stream.begin(spec, now_ms);
+                let shift = Geometry::shift_for(dims);
+                back.reset(shift);
+                self.stream.begin(spec, now_ms, shift);
                 self.event(Event::Begun { dims, sample_type, levels: levels.len() as u8 });
                 Ok(())
             }
@@ -975,10 +986,11 @@ impl Device<'_> {
                 self.shown = Some(Shown { dims: t.spec.dims, spacing: t.spec.spacing, points: 0 });
                 self.commit = true;
                 self.counters.volumes = self.counters.volumes.wrapping_add(1);
+                let spilled = self.stream.spilled();
                 self.event(Event::Committed {
                     dims: t.spec.dims,
-                    commands: back.len() as u32,
-                    dropped: back.dropped(),
+                    commands: (back.len() + spilled.len()) as u32,
+                    dropped: back.dropped().saturating_add(spilled.dropped()),
                     nonfinite_cells: t.stats.nonfinite_cells.min(u64::from(u32::MAX)) as u32,
                 });
                 Ok(())

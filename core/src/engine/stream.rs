@@ -14,7 +14,7 @@
 //! refreshed in between; the next slice's data then waits for the job
 //! (the caller stops feeding), or finishes it first if it comes anyway.
 
-use super::geometry::Geometry;
+use super::geometry::{Geometry, Held};
 use crate::command::{Command, CommandSink, Point3};
 use crate::contour::{ContourStats, RowContourer};
 use crate::trace::Traversal;
@@ -105,24 +105,44 @@ pub(crate) struct Job {
 }
 
 /// The two slices, the decoded rows and the transfer state.
+///
+/// The slice memory holds a transfer's two slices at its start, each
+/// `nx * ny * sample size` bytes; what they leave free holds the part of
+/// the surface that does not fit the back (the spill: a [`Geometry`] lent
+/// those bytes), from the first slice until the engine commits the
+/// volume. So a volume of small slices may have a larger surface: of
+/// 32 x 32 `f32` (8 KB), the 64 KB of the firmware leave room for 9,000
+/// more points.
 #[derive(Debug)]
 pub(crate) struct Stream<'a> {
-    /// Both slices: the first and the second half.
+    /// Both slices, one after the other, and the spill.
     slots: &'a mut [u8],
     rows: [&'a mut [f32]; 2],
     /// The slot receiving slice `z`; the other holds slice `z - 1`.
     cur: usize,
     pub transfer: Option<Transfer>,
+    /// The spill of the last transfer: where in `slots` its store starts,
+    /// and what it holds.
+    spill: Option<(usize, Held)>,
 }
 
-/// Keeps every command; the geometry counts what does not fit.
-struct Keep<'g, 'a>(&'g mut Geometry<'a>);
+/// Keeps every command: in the back while it has room, then in the spill;
+/// the store that refuses one counts it.
+struct Keep<'g, 'a, 's> {
+    back: &'g mut Geometry<'a>,
+    spill: &'g mut Geometry<'s>,
+}
 
-impl CommandSink<Point3> for Keep<'_, '_> {
+impl CommandSink<Point3> for Keep<'_, '_, '_> {
     type Error = Infallible;
     #[inline]
     fn command(&mut self, _level: usize, c: Command<Point3>) -> Result<(), Infallible> {
-        let _ = self.0.push(c);
+        let room = self.back.capacity().saturating_sub(self.back.len());
+        // A polyline may go on from the back into the spill, but does not
+        // start in the back's last slot (were the spill full, that `MoveTo`
+        // would be left alone).
+        let back = self.spill.capacity() == 0 || room > 1 || (room == 1 && !matches!(c, Command::MoveTo(_)));
+        let _ = if back { self.back.push(c) } else { self.spill.push(c) };
         Ok(())
     }
 }
@@ -157,7 +177,7 @@ fn widen<const N: usize>(
 
 impl<'a> Stream<'a> {
     pub(crate) fn new(slots: &'a mut [u8], rows: [&'a mut [f32]; 2]) -> Self {
-        Self { slots, rows, cur: 0, transfer: None }
+        Self { slots, rows, cur: 0, transfer: None, spill: None }
     }
 
     /// Bytes one slice may hold.
@@ -165,16 +185,42 @@ impl<'a> Stream<'a> {
         self.slots.len() / 2
     }
 
-    /// The slice buffers as scratch, while no transfer needs them.
+    /// The slice memory as scratch, while no transfer needs it (and the
+    /// spill is taken).
     pub(crate) fn idle_scratch(&mut self) -> Option<&mut [u8]> {
         if self.transfer.is_some() { None } else { Some(self.slots) }
     }
 
+    /// What the last transfer spilled (counted with the back's).
+    pub(crate) fn spilled(&self) -> Held {
+        self.spill.map_or_else(Held::default, |(_, h)| h)
+    }
+
+    /// Between transfers: the last transfer's spill, moved to the start of
+    /// the slice memory, and the rest of that memory as scratch. The spill
+    /// is forgotten: once the volume is committed the memory is all
+    /// scratch again ([`Stream::idle_scratch`]).
+    pub(crate) fn take_spill(&mut self) -> (Geometry<'_>, &mut [u8]) {
+        let (at, held) = match (self.transfer, self.spill.take()) {
+            (None, Some(spill)) => spill,
+            _ => (0, Held::default()),
+        };
+        let held = Geometry::move_to_front(self.slots, at, held);
+        let (store, rest) = self.slots.split_at_mut(Geometry::bytes_for(held.len()).min(self.slots.len()));
+        (Geometry::lent(store, held), rest)
+    }
+
+    /// Bytes of one slot: the transfer's slice, else the most a slice may
+    /// hold.
+    fn slot_bytes(&self) -> usize {
+        self.transfer.map_or(usize::MAX, |t| t.spec.slice_bytes()).min(self.slice_capacity())
+    }
+
     /// The two slots: (current, previous).
     fn halves(&mut self) -> (&mut [u8], &mut [u8]) {
-        let half = self.slice_capacity();
-        let (a, rest) = self.slots.split_at_mut(half);
-        let b = rest.get_mut(..half).unwrap_or(&mut []);
+        let n = self.slot_bytes();
+        let (a, rest) = self.slots.split_at_mut(n);
+        let b = rest.get_mut(..n).unwrap_or(&mut []);
         if self.cur == 0 { (a, b) } else { (b, a) }
     }
 
@@ -183,9 +229,11 @@ impl<'a> Stream<'a> {
         self.rows.iter().map(|s| s.len()).min().unwrap_or(0)
     }
 
-    /// Start receiving a checked volume.
-    pub(crate) fn begin(&mut self, spec: VolumeSpec, now_ms: u32) {
+    /// Start receiving a checked volume (its surface at `shift`).
+    pub(crate) fn begin(&mut self, spec: VolumeSpec, now_ms: u32, shift: u8) {
         self.cur = 0;
+        let slots = 2 * spec.slice_bytes().min(self.slice_capacity());
+        self.spill = Some((slots, Held::empty(shift)));
         self.transfer = Some(Transfer {
             spec,
             z: 0,
@@ -278,12 +326,19 @@ impl<'a> Stream<'a> {
         let Some(mut job) = t.job else { return false };
         let mut stats = ContourStats::default();
         let mut left = true;
+        let n = self.slot_bytes();
+        let (at, held) = self.spill.unwrap_or((2 * n, Held::empty(geometry.shift())));
+        let (slots, rest) = self.slots.split_at_mut(at.min(self.slots.len()));
+        let mut spill = Geometry::lent(rest, held);
         if let Ok(mut rc) = RowContourer::new::<Infallible>(t.spec.levels.as_slice(), Traversal::Corrected) {
             // (Making the contourer clears its 2 KB of scratch: a short row
             // should not pay that alone.)
             let mut done = 0usize;
+            let mut sink = Keep { back: geometry, spill: &mut spill };
+            let (s0, s1) = slots.split_at(n.min(slots.len()));
+            let slots = [s0, s1];
             loop {
-                match self.row(&t.spec, &mut job, &mut rc, geometry, &mut stats) {
+                match Self::row(&t.spec, &mut job, &mut rc, slots, &mut self.rows, &mut sink, &mut stats) {
                     Some(n) => done = done.saturating_add(n),
                     None => {
                         left = false;
@@ -302,6 +357,7 @@ impl<'a> Stream<'a> {
         } else {
             left = false;
         }
+        self.spill = Some((at, spill.held()));
         t.stats += stats;
         t.job = left.then_some(job);
         self.transfer = Some(t);
@@ -335,11 +391,12 @@ impl<'a> Stream<'a> {
     /// Contour the next row of `job` (see [`Phase`]) and move past it;
     /// returns its cells, or `None` when it has none left.
     fn row(
-        &mut self,
         spec: &VolumeSpec,
         job: &mut Job,
         rc: &mut RowContourer<'_>,
-        geometry: &mut Geometry<'_>,
+        [s0, s1]: [&[u8]; 2],
+        rows: &mut [&mut [f32]; 2],
+        sink: &mut Keep<'_, '_, '_>,
         stats: &mut ContourStats,
     ) -> Option<usize> {
         if !Self::ahead(spec, job) {
@@ -349,15 +406,12 @@ impl<'a> Stream<'a> {
         let every = usize::from(spec.every.max(1));
         let at = job.next as usize;
         let ty = spec.sample_type;
-        let half = self.slots.len() / 2;
-        let (s0, s1) = self.slots.split_at(half);
         let (cur, prev): (&[u8], &[u8]) = if job.slot == 0 { (s0, s1) } else { (s1, s0) };
-        let [r0, r1] = &mut self.rows;
+        let [r0, r1] = rows;
         let n = if job.phase == Phase::Yz { ny } else { nx };
         let (Some(l), Some(h)) = (r0.get_mut(..n), r1.get_mut(..n)) else {
             return None;
         };
-        let mut sink = Keep(geometry);
         let below = usize::from(job.z.saturating_sub(1));
         match job.phase {
             Phase::Xy => {
@@ -365,7 +419,7 @@ impl<'a> Stream<'a> {
                 decode(ty, cur, at * nx, 1, l);
                 decode(ty, cur, (at + 1) * nx, 1, h);
                 let z = f32::from(job.z);
-                let _ = rc.row(l, h, at, |x, y| Point3::new(x, y, z), &mut sink, stats);
+                let _ = rc.row(l, h, at, |x, y| Point3::new(x, y, z), sink, stats);
                 job.next += 1;
             }
             Phase::Xz => {
@@ -373,7 +427,7 @@ impl<'a> Stream<'a> {
                 decode(ty, prev, at * nx, 1, l);
                 decode(ty, cur, at * nx, 1, h);
                 let y = at as f32;
-                let _ = rc.row(l, h, below, |x, v| Point3::new(x, y, v), &mut sink, stats);
+                let _ = rc.row(l, h, below, |x, v| Point3::new(x, y, v), sink, stats);
                 job.next += every as u32;
             }
             Phase::Yz => {
@@ -381,7 +435,7 @@ impl<'a> Stream<'a> {
                 decode(ty, prev, at, nx, l);
                 decode(ty, cur, at, nx, h);
                 let x = at as f32;
-                let _ = rc.row(l, h, below, |u, v| Point3::new(x, u, v), &mut sink, stats);
+                let _ = rc.row(l, h, below, |u, v| Point3::new(x, u, v), sink, stats);
                 job.next += every as u32;
             }
         }

@@ -30,18 +30,21 @@ pub const SIDE: usize = 12;
 
 /// Bytes of the largest z slice the board takes (`nx * ny * sample size`):
 /// 128x128 `u8`, `u16` or `i16`, or 90x90 `f32` (`nx` and `ny` at most
-/// [`EXTENT`]). Between volumes the two slice buffers are the scratch
-/// for stitching and ordering the surface (about 7 bytes a point): 64 KB
-/// order all [`POINTS`].
+/// [`EXTENT`]). What a volume's two slices leave free holds the pieces of
+/// its surface that the received surface has no room for (hydrogen 32^3,
+/// 32x32 `f32` slices: 4,624 of its 12,816); between volumes the slice
+/// buffers are the scratch for stitching and ordering the surface (about
+/// 7 bytes a point): 64 KB order all [`POINTS`].
 pub const SLICE_BYTES: usize = 32 * 1024;
 /// The largest `nx` or `ny`.
 pub const EXTENT: usize = 128;
 /// Points each of the two surfaces holds (6 bytes each, and 2 bits of
-/// kind): the limit on picture complexity, counted as contoured (before
-/// stitching joins the per-subgrid pieces, which leaves a little over
-/// half). Both
-/// surfaces take 102,400 bytes of SRAM. The boot scene has 936 (after
-/// stitching).
+/// kind): the limit on picture complexity. A volume's pieces as contoured
+/// are about 1.75 times its picture's points (stitching joins them at
+/// their shared ends, merging thins collinear runs); those that do not
+/// fit the received surface spill into the slice memory its slices leave
+/// free. Both surfaces take 102,400 bytes of SRAM. The boot scene has 936
+/// (after stitching).
 pub const POINTS: usize = 8192;
 /// Bytes of each surface: [`POINTS`] points of 6 bytes and their kinds
 /// (2 bits each).
