@@ -22,10 +22,12 @@
 //! lengthens a jump), so a new or spinning view needs no re-ordering.
 //!
 //! Memory, in caller scratch (the engine lends the slice buffers, idle
-//! between volumes): the fragment starts, a grid of ends (a singly linked
-//! list per cell, one link per point), all `u32`: about 6.6 bytes a point;
-//! the stitch pass, when that is more than the scratch, keeps them in
-//! `u16`s (surfaces under 32,767 points): about 3.3 bytes a point.
+//! between volumes): the fragment starts and a grid of ends (a singly
+//! linked list per cell: in the order pass one link a point, about 6.6
+//! bytes a point; in the stitch pass two a fragment, about 5 bytes a point
+//! of 3.4-point pieces), all `u32`; the stitch pass, when that is more than
+//! the scratch, keeps them in `u16`s (surfaces under 32,767 points), half
+//! that.
 //! Time: `O(n)` to build, and per fragment a search of the cells within two
 //! rings of the beam, else the next non-empty cell in scan order (a cursor
 //! that only moves on, `O(cells)` in all).
@@ -188,9 +190,13 @@ fn cell_coords(q: Packed, n: [u32; 3], bits: u32) -> [u32; 3] {
     [c(x, nx), c(y, ny), c(z, nz)]
 }
 
-/// The fragments of a geometry and a grid of their ends. An end is a point
-/// index: the first and last point of an open fragment, the point of a dot,
-/// every vertex of a closed loop (in the order pass).
+/// The fragments of a geometry and a grid of their ends: the first and
+/// last point of an open fragment, the point of a dot, every vertex of a
+/// closed loop (in the order pass). The lists hold slots: in the order
+/// pass a slot is a point index (one link a point); in the stitch pass,
+/// which links only first and last points, `2 f` and `2 f + 1` are the
+/// ends of fragment `f` (two links a fragment: fewer than one a point, and
+/// the fragment comes with the end).
 struct Index<'s, 'g> {
     src: Source<'g>,
     w: Words<'s>,
@@ -198,7 +204,7 @@ struct Index<'s, 'g> {
     n: [u32; 3],
     bits: u32,
     /// Word offsets: fragment starts (`frags` of them), cell heads, and one
-    /// link per point.
+    /// link a slot.
     heads: usize,
     links: usize,
     frags: usize,
@@ -229,8 +235,11 @@ impl<'s, 'g> Index<'s, 'g> {
         // Words of `u32`, unless the stitch pass's index has less than a
         // word of lists an end that way and more in `u16`s.
         let ends = if any_vertex { points } else { 2 * frags };
-        let fixed = frags + points;
-        let narrow = !any_vertex && points < NARROW_LIMIT && scratch.len() / 4 < fixed + ends;
+        // A link a slot: a point, or an end.
+        let slots = ends;
+        let fixed = frags + slots;
+        let narrow =
+            !any_vertex && points < NARROW_LIMIT && slots < NARROW_LIMIT && scratch.len() / 4 < fixed + ends;
         let mut w = if narrow { Words::narrow(scratch) } else { Words::wide(scratch) };
         let words = w.len();
         if frags == 0 || points >= DRAWN as usize || words < fixed + 1 {
@@ -242,7 +251,7 @@ impl<'s, 'g> Index<'s, 'g> {
         // fragments, the links and the tour: two ends a fragment, or every
         // point of the loops.
         let tour = if any_vertex { TOUR_WORDS * frags } else { 0 };
-        let spare = words.saturating_sub(frags + points + tour) as u64;
+        let spare = words.saturating_sub(fixed + tour) as u64;
         let budget = spare.min((ends as u64 * 2).max(1)).max(1);
         let cells_at = |b: u32| -> u64 { top.iter().map(|&t| u64::from((u32::from(t) >> b) + 1)).product() };
         let mut bits = 0u32;
@@ -256,7 +265,7 @@ impl<'s, 'g> Index<'s, 'g> {
         let links = heads + cells;
         // The order pass keeps its tour ([`TOUR_WORDS`] a fragment) after
         // the links.
-        if links + points + tour > words {
+        if links + slots + tour > words {
             return None;
         }
         let mut k = 0;
@@ -271,14 +280,48 @@ impl<'s, 'g> Index<'s, 'g> {
         }
         let mut index = Self { src, w, n, bits, heads, links, frags, any_vertex, buckets };
         for f in 0..frags {
-            let (from, to, every) = index.ends(f);
-            for i in from..to {
-                if every || i == from || i + 1 == to {
-                    index.link(i);
-                }
-            }
+            index.each_slot(f, |x, s| x.link(s));
         }
         Some(index)
+    }
+
+    /// Where the order pass keeps its tour: after the links.
+    fn tour_base(&self) -> usize {
+        self.links + if self.any_vertex { self.src.len() } else { 2 * self.frags }
+    }
+
+    /// Call `act` with each slot of fragment `f`'s ends.
+    #[inline]
+    fn each_slot(&mut self, f: usize, mut act: impl FnMut(&mut Self, usize)) {
+        let (from, to, every) = self.ends(f);
+        if self.any_vertex {
+            for i in from..to {
+                if every || i == from || i + 1 == to {
+                    act(self, i);
+                }
+            }
+        } else {
+            act(self, 2 * f);
+            if to - from > 1 {
+                act(self, 2 * f + 1);
+            }
+        }
+    }
+
+    /// The point of slot `s`.
+    #[inline]
+    fn end_point(&self, s: usize) -> usize {
+        if self.any_vertex {
+            return s;
+        }
+        let (from, to) = self.span(s / 2);
+        if s & 1 == 0 { from } else { to - 1 }
+    }
+
+    /// The fragment of slot `s`.
+    #[inline]
+    fn end_frag(&self, s: usize) -> usize {
+        if self.any_vertex { self.frag_of(s) } else { s / 2 }
     }
 
     fn cells(&self) -> usize {
@@ -350,20 +393,20 @@ impl<'s, 'g> Index<'s, 'g> {
         (from, to, self.any_vertex && self.kind(from) == Kind::Loop)
     }
 
-    fn link(&mut self, i: usize) {
-        let c = self.cell(self.point(i));
+    fn link(&mut self, s: usize) {
+        let c = self.cell(self.point(self.end_point(s)));
         let head = self.w.get(self.heads + c);
-        self.w.set(self.links + i, head);
-        self.w.set(self.heads + c, i as u32);
+        self.w.set(self.links + s, head);
+        self.w.set(self.heads + c, s as u32);
     }
 
-    fn unlink(&mut self, i: usize) {
-        let c = self.cell(self.point(i));
+    fn unlink(&mut self, s: usize) {
+        let c = self.cell(self.point(self.end_point(s)));
         let mut prev = NONE;
         let mut at = self.w.get(self.heads + c);
         while at != NONE {
             let next = self.w.get(self.links + at as usize);
-            if at as usize == i {
+            if at as usize == s {
                 if prev == NONE {
                     self.w.set(self.heads + c, next);
                 } else {
@@ -378,18 +421,13 @@ impl<'s, 'g> Index<'s, 'g> {
 
     /// Mark fragment `f` drawn and take its ends out of the grid.
     fn take(&mut self, f: usize) {
-        let (from, to, every) = self.ends(f);
-        for i in from..to {
-            if every || i == from || i + 1 == to {
-                self.unlink(i);
-            }
-        }
+        self.each_slot(f, |x, s| x.unlink(s));
         let s = self.w.get(f);
         self.w.set(f, s | DRAWN);
     }
 
-    /// The ends in `q`'s cell (any point), by calling `visit` until it says
-    /// stop.
+    /// The slots of the ends in cell `c` (any point), by calling `visit`
+    /// until it says stop.
     fn each_end(&self, c: usize, mut visit: impl FnMut(usize) -> bool) {
         let mut at = self.w.get(self.heads + c);
         while at != NONE {
@@ -404,7 +442,8 @@ impl<'s, 'g> Index<'s, 'g> {
     /// path passes through it).
     fn degree(&self, q: Packed) -> usize {
         let mut n = 0;
-        self.each_end(self.cell(q), |i| {
+        self.each_end(self.cell(q), |s| {
+            let i = self.end_point(s);
             if self.point(i) == q {
                 n += if self.kind(i) == Kind::Dot { 2 } else { 1 };
             }
@@ -414,8 +453,8 @@ impl<'s, 'g> Index<'s, 'g> {
     }
 
     /// Of the ends exactly at `cur`, the one whose fragment goes on
-    /// straightest from `prev -> cur`.
-    fn straightest(&self, cur: Packed, prev: Option<Packed>) -> Option<usize> {
+    /// straightest from `prev -> cur`: its point and its fragment.
+    fn straightest(&self, cur: Packed, prev: Option<Packed>) -> Option<(usize, usize)> {
         let v = |q: Packed| [f32::from(q[0]), f32::from(q[1]), f32::from(q[2])];
         let unit = |a: Packed, b: Packed| {
             let (a, b) = (v(a), v(b));
@@ -424,22 +463,24 @@ impl<'s, 'g> Index<'s, 'g> {
             if n > 0.0 { [d[0] / n, d[1] / n, d[2] / n] } else { [0.0; 3] }
         };
         let dir_in = prev.map(|p| unit(p, cur));
-        let mut best: Option<(f32, usize)> = None;
-        self.each_end(self.cell(cur), |i| {
+        let mut best: Option<(f32, (usize, usize))> = None;
+        self.each_end(self.cell(cur), |s| {
+            let i = self.end_point(s);
             if self.point(i) == cur && self.kind(i) != Kind::Dot {
-                let (from, to) = self.span(self.frag_of(i));
+                let f = self.end_frag(s);
+                let (from, to) = self.span(f);
                 let next = if i == from { (from + 1).min(to - 1) } else { i.saturating_sub(1).max(from) };
                 let score = dir_in.map_or(0.0, |d| {
                     let u = unit(cur, self.point(next));
                     d[0] * u[0] + d[1] * u[1] + d[2] * u[2]
                 });
-                if best.is_none_or(|(s, _)| score > s) {
-                    best = Some((score, i));
+                if best.is_none_or(|(b, _)| score > b) {
+                    best = Some((score, (i, f)));
                 }
             }
             true
         });
-        best.map(|(_, i)| i)
+        best.map(|(_, end)| end)
     }
 
     /// The end nearest `cur` within [`RINGS`] rings of cells.
@@ -462,7 +503,8 @@ impl<'s, 'g> Index<'s, 'g> {
                             continue;
                         }
                         let cell = (x + nx * (y + ny * z)) as usize;
-                        self.each_end(cell, |i| {
+                        self.each_end(cell, |s| {
+                            let i = self.end_point(s);
                             let d = dist2(cur, self.point(i));
                             if best.is_none_or(|(bd, _)| d < bd) {
                                 best = Some((d, i));
@@ -492,7 +534,7 @@ impl<'s, 'g> Index<'s, 'g> {
         while *scan < self.cells() {
             let at = self.w.get(self.heads + *scan);
             if at != NONE {
-                return Some(at as usize);
+                return Some(self.end_point(at as usize));
             }
             *scan += 1;
         }
@@ -522,8 +564,8 @@ impl<'s, 'g> Index<'s, 'g> {
             // Each round takes a twin for good: at most `frags` rounds.
             for _ in 0..self.frags {
                 let mut twin = None;
-                self.each_end(self.cell(a), |i| {
-                    let g = self.frag_of(i);
+                self.each_end(self.cell(a), |s| {
+                    let (i, g) = (self.end_point(s), self.end_frag(s));
                     if g != f && self.point(i) == a && !self.is_dot(g) && !self.is_loop(g) {
                         let (f2, t2) = self.span(g);
                         let other = if i == f2 { self.point(t2 - 1) } else { self.point(f2) };
@@ -582,7 +624,7 @@ fn chain_on(
         Pass::Order => {
             // The tour: nearest neighbour, then 2-opt, then each loop entered
             // at its best vertex; drawn last.
-            let mut tour = Tour { base: x.links + src.len(), len: 0 };
+            let mut tour = Tour { base: x.tour_base(), len: 0 };
             let mut scan = 0;
             let mut cur = start;
             for _ in 0..x.frags {
@@ -618,7 +660,7 @@ fn chain_on(
                     } else {
                         continue;
                     };
-                    walk.take(&mut x, dst, end, false, &mut stats);
+                    walk.take(&mut x, dst, (end, f), false, &mut stats);
                     // Each step takes a fragment for good: at most `frags`
                     // of them (a bound the walk keeps even if an end were
                     // ever left in its list).
@@ -830,7 +872,7 @@ struct Walk {
 }
 
 impl Walk {
-    /// Take and draw the fragment of end `end`, entering there: a
+    /// Take and draw fragment `f`, entering at its end `end`: a
     /// continuation of the chain when it starts where the chain ends (and
     /// `join` allows, or the ends meet exactly), else a new chain after a
     /// jump.
@@ -838,11 +880,10 @@ impl Walk {
         &mut self,
         x: &mut Index<'_, '_>,
         dst: &mut Geometry<'_>,
-        end: usize,
+        (end, f): (usize, usize),
         join: bool,
         stats: &mut ChainStats,
     ) {
-        let f = x.frag_of(end);
         x.take(f);
         self.draw(x, dst, f, end, join, stats);
     }
@@ -1139,7 +1180,7 @@ mod tests {
             for afresh in [false, true] {
                 let mut scratch = vec![0u8; 64 * 1024];
                 let mut x = Index::build(Source::one(&src), &mut scratch, true, false).expect("room");
-                let mut tour = Tour { base: x.links + src.len(), len: 0 };
+                let mut tour = Tour { base: x.tour_base(), len: 0 };
                 for f in 0..x.frags {
                     let end = x.span(f).0;
                     tour.push(&mut x, f, end);
