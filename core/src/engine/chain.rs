@@ -314,8 +314,11 @@ impl<'s, 'g> Index<'s, 'g> {
         if self.any_vertex {
             return s;
         }
-        let (from, to) = self.span(s / 2);
-        if s & 1 == 0 { from } else { to - 1 }
+        if s & 1 == 0 {
+            // A fragment's first point: its start alone (half the ends).
+            return (self.w.get(s / 2) & !DRAWN) as usize;
+        }
+        self.span(s / 2).1 - 1
     }
 
     /// The fragment of slot `s`.
