@@ -182,6 +182,19 @@ fn length(a: Packed, b: Packed) -> f32 {
     sqrt(dist2f(a, b))
 }
 
+/// 64 well-mixed bits of a point (for [`Index::odd`]).
+fn point_hash([x, y, z]: Packed) -> u64 {
+    let mix = |h: u32| {
+        let h = (h ^ (h >> 16)).wrapping_mul(0x85EB_CA6B);
+        let h = (h ^ (h >> 13)).wrapping_mul(0xC2B2_AE35);
+        h ^ (h >> 16)
+    };
+    let (x, y, z) = (u32::from(x), u32::from(y), u32::from(z));
+    let a = mix(x | (y << 16)) ^ mix(z ^ 0x9E37_79B9);
+    let b = mix(y | (z << 16)) ^ mix(x ^ 0x7F4A_7C15);
+    u64::from(a) << 32 | u64::from(b)
+}
+
 /// Cell coordinates of `q` in a grid of `n` cells of `2^bits` codes.
 fn cell_coords(q: Packed, n: [u32; 3], bits: u32) -> [u32; 3] {
     let [x, y, z] = q;
@@ -210,6 +223,13 @@ struct Index<'s, 'g> {
     frags: usize,
     /// Closed loops may be entered at any vertex.
     any_vertex: bool,
+    /// The stitch pass: the hashes of the points of the ends not drawn
+    /// ([`point_hash`], a dot's counting as nothing), xor-ed. They cancel
+    /// in pairs, so this is zero when every point has an even number of
+    /// ends (no open path is left to start), and all but surely not
+    /// otherwise (were it zero then, the open paths left would be walked
+    /// among the closed loops: drawn all the same, in more pieces).
+    odd: u64,
     /// The stitch pass only ever looks up ends at exact points: its lists
     /// are buckets of a hash of the point (this many), not cells of space,
     /// so that the ends of a surface, a sheet through few of its box's
@@ -278,9 +298,10 @@ impl<'s, 'g> Index<'s, 'g> {
         for c in 0..cells {
             w.set(heads + c, NONE);
         }
-        let mut index = Self { src, w, n, bits, heads, links, frags, any_vertex, buckets };
+        let mut index = Self { src, w, n, bits, heads, links, frags, any_vertex, buckets, odd: 0 };
         for f in 0..frags {
             index.each_slot(f, |x, s| x.link(s));
+            index.odd ^= index.ends_hash(f);
         }
         Some(index)
     }
@@ -422,22 +443,40 @@ impl<'s, 'g> Index<'s, 'g> {
         }
     }
 
-    /// Mark fragment `f` drawn and take its ends out of the grid.
+    /// Mark fragment `f` drawn and take its ends out of the grid (in the
+    /// stitch pass they stay in their lists, passed over as drawn: a list
+    /// there is the ends at a point or two, and finding an end's
+    /// predecessor cost more than passing it).
     fn take(&mut self, f: usize) {
-        self.each_slot(f, |x, s| x.unlink(s));
+        if self.any_vertex {
+            self.each_slot(f, |x, s| x.unlink(s));
+        } else {
+            self.odd ^= self.ends_hash(f);
+        }
         let s = self.w.get(f);
         self.w.set(f, s | DRAWN);
     }
 
-    /// The slots of the ends in cell `c` (any point), by calling `visit`
-    /// until it says stop.
+    /// Fragment `f`'s share of [`Index::odd`] (none in the order pass).
+    fn ends_hash(&self, f: usize) -> u64 {
+        if self.any_vertex || self.is_dot(f) {
+            return 0;
+        }
+        let (from, to) = self.span(f);
+        let h = point_hash(self.point(from));
+        if to - from > 1 { h ^ point_hash(self.point(to - 1)) } else { h }
+    }
+
+    /// The slots of the ends in cell `c` (any point) of fragments not yet
+    /// drawn, by calling `visit` until it says stop.
     fn each_end(&self, c: usize, mut visit: impl FnMut(usize) -> bool) {
         let mut at = self.w.get(self.heads + c);
         while at != NONE {
-            if !visit(at as usize) {
+            let s = at as usize;
+            if (self.any_vertex || !self.drawn(s / 2)) && !visit(s) {
                 return;
             }
-            at = self.w.get(self.links + at as usize);
+            at = self.w.get(self.links + s);
         }
     }
 
@@ -648,9 +687,13 @@ fn chain_on(
         Pass::Stitch => {
             x.cull(&mut stats);
             // Open paths first (from an end where an odd number meet), then
-            // what is left: closed loops.
+            // what is left: closed loops. (The first round ends when no odd
+            // end is left: at once for a closed surface.)
             for odd in [true, false] {
                 for f in 0..x.frags {
+                    if odd && x.odd == 0 {
+                        break;
+                    }
                     if x.drawn(f) {
                         continue;
                     }
@@ -1222,7 +1265,8 @@ mod tests {
             }
             // Too little room for `u32` words and a list an end: `u16`s.
             let frags = (0..src.len()).filter(|&i| src.kind(i).is_some_and(Kind::starts)).count();
-            let tight = 2 * (frags + src.len() + frags);
+            // The starts, two links a fragment, a list for every other end.
+            let tight = 2 * (frags + 2 * frags + frags);
             proptest::prop_assert!(matches!(
                 Index::build(Source::one(&src), &mut vec![0u8; tight], false, true).map(|x| x.w),
                 Some(Words::Narrow(_))
@@ -1238,6 +1282,56 @@ mod tests {
             }
             proptest::prop_assert_eq!(&out[0], &out[1]);
             proptest::prop_assert_eq!(&out[0], &out[2]);
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(300))]
+        #[test]
+        fn open_paths_and_loops_cut_shuffled_and_turned_stitch_whole(
+            shapes in proptest::collection::vec((2usize..9, proptest::bool::ANY), 1..12),
+            cuts in proptest::collection::vec(1usize..4, 64),
+            order in proptest::collection::vec(proptest::num::u32::ANY, 64),
+        ) {
+            // Open paths along x (at y = k, z = 5) and square loops (at
+            // y = k, z in 0..=1), apart from each other: each must come out
+            // as one polyline, whatever the fragments' order and direction.
+            let mut frags: Vec<Vec<Packed>> = Vec::new();
+            let mut cut = cuts.iter().cycle();
+            for (k, &(n, closed)) in shapes.iter().enumerate() {
+                let y = k as u16;
+                let pts: Vec<Packed> = if closed {
+                    vec![[0, y, 0], [1, y, 0], [1, y, 1], [0, y, 1], [0, y, 0]]
+                } else {
+                    (0..n as u16).map(|j| [j, y, 5]).collect()
+                };
+                let mut at = 0;
+                while at + 1 < pts.len() {
+                    let end = (at + cut.next().copied().unwrap_or(1)).min(pts.len() - 1);
+                    frags.push(pts[at..=end].to_vec());
+                    at = end;
+                }
+            }
+            let mut keyed: Vec<(u32, Vec<Packed>)> =
+                frags.into_iter().zip(order.iter().cycle()).map(|(f, &o)| (o, f)).collect();
+            keyed.sort_by_key(|(o, _)| *o);
+            let mut p = store(256);
+            let mut src = Geometry::new(&mut p);
+            src.reset(0);
+            for (o, mut f) in keyed {
+                if o % 2 == 1 {
+                    f.reverse();
+                }
+                for (j, &q) in f.iter().enumerate() {
+                    src.push_raw(q, if j == 0 { Kind::Move } else { Kind::Line });
+                }
+            }
+            let mut p2 = store(256);
+            let mut dst = Geometry::new(&mut p2);
+            let mut scratch = vec![0u8; 16 * 1024];
+            let st = chain(Source::one(&src), &mut dst, &mut scratch, [0; 3], 0.0, Pass::Stitch);
+            let loops = shapes.iter().filter(|s| s.1).count() as u32;
+            proptest::prop_assert_eq!((st.polylines, st.loops), (shapes.len() as u32, loops));
         }
     }
 
