@@ -85,16 +85,16 @@ pub(crate) enum Pass {
 
 /// The index's words over a byte buffer (the scratch is lent as bytes):
 /// `u32`s, or, where those would not fit, `u16`s ([`Words::narrow`]: for
-/// the stitch pass, whose words are all point indices or [`NONE`], of
-/// fewer than [`NARROW_LIMIT`] points). One bounds check and one load a
-/// word.
+/// the stitch pass, whose words are all point or end indices or [`NONE`],
+/// when there are fewer than [`NARROW_LIMIT`] of each). One bounds check
+/// and one load a word.
 enum Words<'s> {
     Wide(&'s mut [[u8; 4]]),
     Narrow(&'s mut [[u8; 2]]),
 }
 
-/// Points below which the stitch pass may keep its index in `u16`s: the
-/// top bit is [`DRAWN`], all ones [`NONE`].
+/// Points (and ends) below which the stitch pass may keep its index in
+/// `u16`s: the top bit is [`DRAWN`], all ones [`NONE`].
 const NARROW_LIMIT: usize = 0x7FFF;
 
 impl<'s> Words<'s> {
