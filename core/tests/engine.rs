@@ -831,6 +831,52 @@ fn pieces_more_than_the_back_holds_spill_into_the_slice_memory_small_slices_leav
 }
 
 #[test]
+fn a_spilled_surface_draws_exactly_the_segments_of_whole_volume_contouring() {
+    // Surfaces of nine tenths of the pieces (stitched, they are fewer: a
+    // joint is one point, not two), the last tenth spilled beside the
+    // slices, and no merging: the picture is the contour's segments, each
+    // once.
+    for (demo, n, ty) in [
+        (Demo::Gyroid, 14, SampleType::U8),
+        (Demo::Torus, 16, SampleType::I16),
+        (Demo::Sphere, 13, SampleType::F32),
+        (Demo::Hydrogen, 18, SampleType::U16),
+    ] {
+        let v = Vol::demo(demo, n, ty);
+        let mut mem = big();
+        let mut whole = engine(&mut mem);
+        whole.feed(&Host::new().volume(&v), 0);
+        whole.update(0);
+        let pieces = whole.chain_stats().points_in as usize;
+        let mut slices = vec![0u8; 2 * v.slice_bytes() + Geometry::bytes_for(pieces)];
+        let mut rows = vec![0f32; 2 * n];
+        let room = Geometry::bytes_for(pieces * 9 / 10);
+        let (mut front, mut back) = (vec![0u8; room], vec![0u8; room]);
+        let (r0, r1) = rows.split_at_mut(n);
+        // Stitching and ordering in scratch of their own (the slice memory
+        // has just the room for the slices and the spill).
+        let mut scratch = vec![0u8; 8 * pieces];
+        let buffers = Buffers {
+            slices: &mut slices,
+            rows: [r0, r1],
+            front: &mut front,
+            back: &mut back,
+            scratch: &mut scratch,
+        };
+        let cfg = EngineConfig { optimize: OptimizeConfig { tolerance: 0.0 }, ..EngineConfig::default() };
+        let mut e = Engine::new(cfg, buffers).unwrap();
+        e.feed(&Host::new().volume(&v), 0);
+        let ev = events(&mut e);
+        let committed =
+            Event::Committed { dims: v.dims, commands: pieces as u32, dropped: 0, nonfinite_cells: 0 };
+        assert!(ev.contains(&committed), "{demo:?} {ev:?}");
+        e.update(0);
+        assert!(e.chain_stats().ordered, "{demo:?}");
+        assert_eq!(shown(&e), batch(&v), "{demo:?}");
+    }
+}
+
+#[test]
 fn a_spill_leaves_nothing_behind() {
     // In the firmware's memory: hydrogen 32^3 spills; then a transfer of it
     // spills and is abandoned half way (superseded); then a small volume

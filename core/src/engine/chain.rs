@@ -1335,6 +1335,55 @@ mod tests {
         }
     }
 
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(300))]
+        #[test]
+        fn pieces_in_two_stores_chain_as_in_one(
+            segs in proptest::collection::vec(([0u16..6, 0u16..6, 0u16..3], [0u16..6, 0u16..6, 0u16..3], 0u8..8), 1..120),
+            cut in 0usize..400,
+        ) {
+            let mut p = store(512);
+            let mut one = Geometry::new(&mut p);
+            one.reset(3);
+            for &(a, b, shape) in &segs {
+                match shape {
+                    0 => { one.push_raw(a, Kind::Dot); }
+                    1 => {
+                        one.push_raw(a, Kind::Move);
+                        one.push_raw([b[0], a[1], a[2]], Kind::Line);
+                        one.push_raw(b, Kind::Line);
+                    }
+                    _ => {
+                        one.push_raw(a, Kind::Move);
+                        one.push_raw(b, Kind::Line);
+                    }
+                }
+            }
+            // The same points, the first `cut` in one store and the rest in
+            // another (a polyline may straddle them).
+            let cut = cut.min(one.len());
+            let (mut p1, mut p2) = (store(512), store(512));
+            let (mut head, mut tail) = (Geometry::new(&mut p1), Geometry::new(&mut p2));
+            head.reset(3);
+            tail.reset(3);
+            for i in 0..one.len() {
+                let (q, k) = one.get(i).unwrap();
+                if i < cut { head.push_raw(q, k) } else { tail.push_raw(q, k) };
+            }
+            for pass in [Pass::Stitch, Pass::Order] {
+                let mut out = Vec::new();
+                for src in [Source::one(&one), Source::two(&head, &tail)] {
+                    let mut q = store(512);
+                    let mut dst = Geometry::new(&mut q);
+                    let mut scratch = vec![0u8; 16 * 1024];
+                    let st = chain(src, &mut dst, &mut scratch, [0; 3], 0.0, pass);
+                    out.push((dst.commands().collect::<Vec<_>>(), st));
+                }
+                proptest::prop_assert_eq!(&out[0], &out[1]);
+            }
+        }
+    }
+
     #[test]
     fn a_square_of_four_fragments_in_any_order_becomes_one_closed_loop() {
         let mut p = store(16);

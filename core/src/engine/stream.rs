@@ -138,10 +138,12 @@ impl CommandSink<Point3> for Keep<'_, '_, '_> {
     #[inline]
     fn command(&mut self, _level: usize, c: Command<Point3>) -> Result<(), Infallible> {
         let room = self.back.capacity().saturating_sub(self.back.len());
-        // A polyline may go on from the back into the spill, but does not
-        // start in the back's last slot (were the spill full, that `MoveTo`
-        // would be left alone).
-        let back = self.spill.capacity() == 0 || room > 1 || (room == 1 && !matches!(c, Command::MoveTo(_)));
+        // The back until the spill takes its first command (in order: the
+        // spill's points come after all of the back's). A polyline may go on
+        // from the back into the spill, but does not start in the back's
+        // last slot (were the spill full, that `MoveTo` would be left alone).
+        let back = self.spill.capacity() == 0
+            || (self.spill.is_empty() && (room > 1 || (room == 1 && !matches!(c, Command::MoveTo(_)))));
         let _ = if back { self.back.push(c) } else { self.spill.push(c) };
         Ok(())
     }
@@ -446,6 +448,45 @@ impl<'a> Stream<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::engine::geometry::{Kind, Source};
+
+    #[test]
+    fn pieces_go_on_in_the_spill_in_order() {
+        let p = |x: f32| Point3::new(x, 0.0, 0.0);
+        // A back of 3 points: a polyline does not start in its last slot,
+        // and once the spill has a point, everything after goes there too.
+        let (mut b, mut s) = (vec![0u8; Geometry::bytes_for(3)], vec![0u8; Geometry::bytes_for(10)]);
+        let (mut back, mut spill) = (Geometry::new(&mut b), Geometry::new(&mut s));
+        let mut keep = Keep { back: &mut back, spill: &mut spill };
+        let cmds = [
+            Command::MoveTo(p(1.0)),
+            Command::LineTo(p(2.0)),
+            Command::MoveTo(p(3.0)),
+            Command::LineTo(p(4.0)),
+            Command::Point(p(5.0)),
+            Command::MoveTo(p(6.0)),
+            Command::LineTo(p(7.0)),
+        ];
+        for c in cmds {
+            let _ = keep.command(0, c);
+        }
+        assert_eq!((back.len(), spill.len()), (2, 5));
+        let src = Source::two(&back, &spill);
+        let got: Vec<_> = (0..src.len()).filter_map(|i| src.get(i)).map(|(q, k)| (q[0], k)).collect();
+        let (m, l, d) = (Kind::Move, Kind::Line, Kind::Dot);
+        assert_eq!(got, [(1, m), (2, l), (3, m), (4, l), (5, d), (6, m), (7, l)]);
+        // A line that reaches the back's end goes on in the spill.
+        let (mut b, mut s) = (vec![0u8; Geometry::bytes_for(2)], vec![0u8; Geometry::bytes_for(4)]);
+        let (mut back, mut spill) = (Geometry::new(&mut b), Geometry::new(&mut s));
+        let mut keep = Keep { back: &mut back, spill: &mut spill };
+        for c in [Command::MoveTo(p(1.0)), Command::LineTo(p(2.0)), Command::LineTo(p(3.0))] {
+            let _ = keep.command(0, c);
+        }
+        let src = Source::two(&back, &spill);
+        let got: Vec<_> = (0..src.len()).filter_map(|i| src.get(i)).map(|(q, k)| (q[0], k)).collect();
+        assert_eq!(got, [(1, m), (2, l), (3, l)]);
+        assert_eq!((back.len(), spill.len()), (2, 1));
+    }
 
     #[test]
     fn decode_little_endian_types() {
