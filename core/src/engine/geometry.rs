@@ -66,13 +66,8 @@ impl Kind {
 pub struct Geometry<'a> {
     points: &'a mut [[u8; 6]],
     kinds: &'a mut [u8],
-    len: usize,
-    dropped: u32,
-    /// A command of the open polyline was refused: its later `LineTo`s are
-    /// refused too, until the next `MoveTo` or `Point`.
-    broken: bool,
-    /// Fixed point: `1 / 2^shift` voxel per code.
-    shift: u8,
+    /// Everything but the bytes.
+    held: Held,
 }
 
 impl<'a> Geometry<'a> {
@@ -82,7 +77,7 @@ impl<'a> Geometry<'a> {
         let n = Self::points_in(bytes.len());
         let (points, kinds) = bytes.split_at_mut(6 * n);
         let points = points.as_chunks_mut::<6>().0;
-        Self { points, kinds, len: 0, dropped: 0, broken: false, shift: 0 }
+        Self { points, kinds, held: Held::default() }
     }
 
     /// Bytes that hold `points` points: 6 each, and their kinds (2 bits
@@ -128,35 +123,32 @@ impl<'a> Geometry<'a> {
 
     /// Points held.
     pub fn len(&self) -> usize {
-        self.len
+        self.held.len
     }
 
     /// Whether no point is held.
     pub fn is_empty(&self) -> bool {
-        self.len == 0
+        self.held.len == 0
     }
 
     /// Commands refused since the last [`Geometry::reset`].
     pub fn dropped(&self) -> u32 {
-        self.dropped
+        self.held.dropped
     }
 
     /// The fixed point shift.
     pub fn shift(&self) -> u8 {
-        self.shift
+        self.held.shift
     }
 
     /// Forget every point and take a new scale.
     pub fn reset(&mut self, shift: u8) {
-        self.len = 0;
-        self.dropped = 0;
-        self.broken = false;
-        self.shift = shift.min(12);
+        self.held = Held::empty(shift);
     }
 
     /// `p` in this store's fixed point (clamped to the `u16` range).
     pub fn quantise(&self, p: Point3) -> Packed {
-        Self::quantise_with(self.shift, p)
+        Self::quantise_with(self.held.shift, p)
     }
 
     /// `p` in the fixed point of `shift` (clamped to the `u16` range).
@@ -179,13 +171,13 @@ impl<'a> Geometry<'a> {
     pub fn point(&self, q: Packed) -> Point3 {
         // 2^-shift, exactly: built from its exponent bits, not a division
         // (a 14-cycle VDIV on the M4, for every point of every frame).
-        let k = f32::from_bits((127 - u32::from(self.shift)) << 23);
+        let k = f32::from_bits((127 - u32::from(self.held.shift)) << 23);
         Point3::new(f32::from(q[0]) * k, f32::from(q[1]) * k, f32::from(q[2]) * k)
     }
 
     /// Point `i` and its kind.
     pub fn get(&self, i: usize) -> Option<(Packed, Kind)> {
-        if i >= self.len {
+        if i >= self.held.len {
             return None;
         }
         let p = unpack(self.points.get(i)?);
@@ -196,7 +188,7 @@ impl<'a> Geometry<'a> {
     /// Point `i` alone (no kind: the stitcher's hot lookups).
     #[inline]
     pub(crate) fn point_at(&self, i: usize) -> Option<Packed> {
-        if i >= self.len {
+        if i >= self.held.len {
             return None;
         }
         self.points.get(i).map(unpack)
@@ -205,7 +197,7 @@ impl<'a> Geometry<'a> {
     /// The kind of point `i` alone.
     #[inline]
     pub(crate) fn kind(&self, i: usize) -> Option<Kind> {
-        if i >= self.len {
+        if i >= self.held.len {
             return None;
         }
         let byte = *self.kinds.get(i / 4)?;
@@ -221,26 +213,26 @@ impl<'a> Geometry<'a> {
 
     /// Append a point of `kind`; false when full (counted).
     pub(crate) fn push_raw(&mut self, q: Packed, kind: Kind) -> bool {
-        if self.len >= self.capacity() {
-            self.dropped = self.dropped.saturating_add(1);
+        if self.held.len >= self.capacity() {
+            self.held.dropped = self.held.dropped.saturating_add(1);
             return false;
         }
-        if let Some(slot) = self.points.get_mut(self.len) {
+        if let Some(slot) = self.points.get_mut(self.held.len) {
             *slot = pack(q);
         }
-        self.set_kind(self.len, kind);
-        self.len += 1;
+        self.set_kind(self.held.len, kind);
+        self.held.len += 1;
         true
     }
 
     /// Drop the last point.
     pub(crate) fn pop(&mut self) {
-        self.len = self.len.saturating_sub(1);
+        self.held.len = self.held.len.saturating_sub(1);
     }
 
     /// Mark point `i` (a polyline's first) as the start of a closed loop.
     pub(crate) fn close_at(&mut self, i: usize) {
-        if i < self.len {
+        if i < self.held.len {
             self.set_kind(i, Kind::Loop);
         }
     }
@@ -251,8 +243,8 @@ impl<'a> Geometry<'a> {
     /// The command, when the store is full.
     pub fn push(&mut self, command: Command<Point3>) -> Result<(), Command<Point3>> {
         let kind = match command {
-            Command::LineTo(_) if self.broken => {
-                self.dropped = self.dropped.saturating_add(1);
+            Command::LineTo(_) if self.held.broken => {
+                self.held.dropped = self.held.dropped.saturating_add(1);
                 return Err(command);
             }
             Command::LineTo(_) => Kind::Line,
@@ -260,14 +252,14 @@ impl<'a> Geometry<'a> {
             Command::Point(_) => Kind::Dot,
         };
         if kind.starts() {
-            self.broken = false;
+            self.held.broken = false;
         }
         if !self.push_raw(self.quantise(*command.point()), kind) {
-            self.broken = true;
+            self.held.broken = true;
             // A MoveTo whose line did not fit would draw nothing: take it back.
-            if matches!(self.get(self.len.wrapping_sub(1)), Some((_, Kind::Move))) {
+            if matches!(self.get(self.held.len.wrapping_sub(1)), Some((_, Kind::Move))) {
                 self.pop();
-                self.dropped = self.dropped.saturating_add(1);
+                self.held.dropped = self.held.dropped.saturating_add(1);
             }
             return Err(command);
         }
@@ -282,7 +274,7 @@ impl<'a> Geometry<'a> {
 
     /// Polylines and dots held.
     pub fn polylines(&self) -> usize {
-        (0..self.len).filter(|&i| self.get(i).is_some_and(|(_, k)| k.starts())).count()
+        (0..self.held.len).filter(|&i| self.get(i).is_some_and(|(_, k)| k.starts())).count()
     }
 }
 
@@ -294,7 +286,10 @@ impl<'a> Geometry<'a> {
 pub(crate) struct Held {
     len: usize,
     dropped: u32,
+    /// A command of the open polyline was refused: its later `LineTo`s are
+    /// refused too, until the next `MoveTo` or `Point`.
     broken: bool,
+    /// Fixed point: `1 / 2^shift` voxel per code.
     shift: u8,
 }
 
@@ -318,17 +313,14 @@ impl Held {
 impl<'a> Geometry<'a> {
     /// What it holds, to lend its bytes again with [`Geometry::lent`].
     pub(crate) fn held(&self) -> Held {
-        Held { len: self.len, dropped: self.dropped, broken: self.broken, shift: self.shift }
+        self.held
     }
 
     /// The store `held` describes, over the same bytes it was taken from
     /// (or a copy of them: [`Geometry::move_to_front`]).
     pub(crate) fn lent(bytes: &'a mut [u8], held: Held) -> Self {
         let mut g = Self::new(bytes);
-        g.len = held.len.min(g.capacity());
-        g.dropped = held.dropped;
-        g.broken = held.broken;
-        g.shift = held.shift.min(12);
+        g.held = Held { len: held.len.min(g.capacity()), shift: held.shift.min(12), ..held };
         g
     }
 
@@ -380,31 +372,34 @@ impl<'g> Source<'g> {
         self.head.shift()
     }
 
+    /// The store point `i` is in, and its index there.
+    #[inline]
+    fn locate(&self, i: usize) -> Option<(&'g Geometry<'g>, usize)> {
+        match i.checked_sub(self.head.len()) {
+            None => Some((self.head, i)),
+            Some(j) => Some((self.tail?, j)),
+        }
+    }
+
     /// Point `i` and its kind.
     #[inline]
     pub(crate) fn get(&self, i: usize) -> Option<(Packed, Kind)> {
-        match i.checked_sub(self.head.len()) {
-            None => self.head.get(i),
-            Some(j) => self.tail?.get(j),
-        }
+        let (g, j) = self.locate(i)?;
+        g.get(j)
     }
 
     /// Point `i` alone.
     #[inline]
     pub(crate) fn point_at(&self, i: usize) -> Option<Packed> {
-        match i.checked_sub(self.head.len()) {
-            None => self.head.point_at(i),
-            Some(j) => self.tail?.point_at(j),
-        }
+        let (g, j) = self.locate(i)?;
+        g.point_at(j)
     }
 
     /// The kind of point `i` alone.
     #[inline]
     pub(crate) fn kind(&self, i: usize) -> Option<Kind> {
-        match i.checked_sub(self.head.len()) {
-            None => self.head.kind(i),
-            Some(j) => self.tail?.kind(j),
-        }
+        let (g, j) = self.locate(i)?;
+        g.kind(j)
     }
 }
 

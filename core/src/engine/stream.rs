@@ -234,8 +234,6 @@ impl<'a> Stream<'a> {
     /// Start receiving a checked volume (its surface at `shift`).
     pub(crate) fn begin(&mut self, spec: VolumeSpec, now_ms: u32, shift: u8) {
         self.cur = 0;
-        let slots = 2 * spec.slice_bytes().min(self.slice_capacity());
-        self.spill = Some((slots, Held::empty(shift)));
         self.transfer = Some(Transfer {
             spec,
             z: 0,
@@ -244,6 +242,8 @@ impl<'a> Stream<'a> {
             stats: ContourStats::default(),
             job: None,
         });
+        // The spill starts after the transfer's two slots.
+        self.spill = Some((2 * self.slot_bytes(), Held::empty(shift)));
     }
 
     /// Whether a completed slice still has contouring to do.
