@@ -27,24 +27,46 @@ use std::convert::Infallible;
 struct Mem {
     slices: Vec<u8>,
     rows: Vec<f32>,
-    surfaces: Vec<u8>,
+    front: Vec<u8>,
+    back: Vec<u8>,
     scratch: Vec<u8>,
 }
 
 impl Mem {
+    /// Slices of `slice` bytes, rows of `extent`, surfaces of `points`, and
+    /// scratch to stitch and order them all.
     fn new(slice: usize, extent: usize, points: usize) -> Self {
+        Self::sized(2 * slice, extent, [points; 2], 8 * points)
+    }
+
+    /// `slices` bytes of slice memory in all, rows of `extent`, a front
+    /// and a back of `points`, and `scratch` bytes more.
+    fn sized(slices: usize, extent: usize, [front, back]: [usize; 2], scratch: usize) -> Self {
         Self {
-            slices: vec![0; 2 * slice],
+            slices: vec![0; slices],
             rows: vec![0.0; 2 * extent],
-            surfaces: vec![0; 2 * Geometry::bytes_for(points)],
-            scratch: vec![0; 8 * points],
+            front: vec![0; Geometry::bytes_for(front)],
+            back: vec![0; Geometry::bytes_for(back)],
+            scratch: vec![0; scratch],
         }
     }
 
     fn buffers(&mut self) -> Buffers<'_> {
-        Buffers::halves(&mut self.slices, &mut self.rows, &mut self.surfaces, &mut self.scratch)
+        let half = self.rows.len() / 2;
+        let (r0, r1) = self.rows.split_at_mut(half);
+        Buffers {
+            slices: &mut self.slices,
+            rows: [r0, r1],
+            front: &mut self.front,
+            back: &mut self.back,
+            scratch: &mut self.scratch,
+        }
     }
 }
+
+/// The firmware's engine memory: slices of 32 KB, rows of 128, surfaces of
+/// 8,192 points, no more scratch.
+type Firmware = StaticBuffers<{ 32 * 1024 }, 128, { Geometry::bytes_for(8192) }>;
 
 /// A volume to send.
 #[derive(Clone)]
@@ -807,17 +829,8 @@ fn pieces_more_than_the_front_holds_fit_it_once_stitched_and_merged() {
     // A front of 8,192 points, a back of twice that: the 12,816 pieces fit
     // the back, their 9,088 points stitched but unmerged would not fit the
     // front.
-    let (mut slices, mut rows) = (vec![0u8; 2 * 64 * 64 * 4], vec![0f32; 2 * 64]);
-    let (mut front, mut back) = (vec![0u8; Geometry::bytes_for(8192)], vec![0u8; Geometry::bytes_for(16384)]);
-    let mut scratch = vec![0u8; 8 * 16384];
-    let (r0, r1) = rows.split_at_mut(64);
-    shows_hydrogen32_whole(Buffers {
-        slices: &mut slices,
-        rows: [r0, r1],
-        front: &mut front,
-        back: &mut back,
-        scratch: &mut scratch,
-    });
+    let mut mem = Mem::sized(2 * 64 * 64 * 4, 64, [8192, 16384], 8 * 16384);
+    shows_hydrogen32_whole(mem.buffers());
 }
 
 #[test]
@@ -826,7 +839,7 @@ fn pieces_more_than_the_back_holds_spill_into_the_slice_memory_small_slices_leav
     // more scratch. Hydrogen's 32 x 32 f32 slices take 8 KB of the 64:
     // 4,624 of its pieces go into the rest, and stitching finds its index
     // room beside them.
-    let mut mem = Box::new(StaticBuffers::<{ 32 * 1024 }, 128, { Geometry::bytes_for(8192) }>::new());
+    let mut mem = Box::new(Firmware::new());
     shows_hydrogen32_whole(mem.buffers());
 }
 
@@ -848,23 +861,11 @@ fn a_spilled_surface_draws_exactly_the_segments_of_whole_volume_contouring() {
         whole.feed(&Host::new().volume(&v), 0);
         whole.update(0);
         let pieces = whole.chain_stats().points_in as usize;
-        let mut slices = vec![0u8; 2 * v.slice_bytes() + Geometry::bytes_for(pieces)];
-        let mut rows = vec![0f32; 2 * n];
-        let room = Geometry::bytes_for(pieces * 9 / 10);
-        let (mut front, mut back) = (vec![0u8; room], vec![0u8; room]);
-        let (r0, r1) = rows.split_at_mut(n);
         // Stitching and ordering in scratch of their own (the slice memory
         // has just the room for the slices and the spill).
-        let mut scratch = vec![0u8; 8 * pieces];
-        let buffers = Buffers {
-            slices: &mut slices,
-            rows: [r0, r1],
-            front: &mut front,
-            back: &mut back,
-            scratch: &mut scratch,
-        };
-        let cfg = EngineConfig { optimize: OptimizeConfig { tolerance: 0.0 }, ..EngineConfig::default() };
-        let mut e = Engine::new(cfg, buffers).unwrap();
+        let slices = 2 * v.slice_bytes() + Geometry::bytes_for(pieces);
+        let mut spilled = Mem::sized(slices, n, [pieces * 9 / 10; 2], 8 * pieces);
+        let mut e = engine(&mut spilled);
         e.feed(&Host::new().volume(&v), 0);
         let ev = events(&mut e);
         let committed =
@@ -882,13 +883,12 @@ fn a_spill_leaves_nothing_behind() {
     // spills and is abandoned half way (superseded); then a small volume
     // shows exactly as it does in a fresh engine, and the spilled picture
     // stays on screen until it does.
-    type Fw = StaticBuffers<{ 32 * 1024 }, 128, { Geometry::bytes_for(8192) }>;
     let (h, small) = (hydrogen32(), Vol::demo(Demo::Gyroid, 20, SampleType::U16));
-    let mut fresh = Box::new(Fw::new());
+    let mut fresh = Box::new(Firmware::new());
     let mut f = Engine::new(EngineConfig::default(), fresh.buffers()).unwrap();
     f.feed(&Host::new().volume(&small), 0);
     f.update(0);
-    let mut mem = Box::new(Fw::new());
+    let mut mem = Box::new(Firmware::new());
     let mut e = Engine::new(EngineConfig::default(), mem.buffers()).unwrap();
     let mut host = Host::new();
     e.feed(&host.volume(&h), 0);

@@ -1102,6 +1102,27 @@ mod tests {
         vec![0; Geometry::bytes_for(n)]
     }
 
+    /// Pieces on a small lattice, as the property tests draw them: shape 0
+    /// a dot, 1 a three-point fragment (an elbow), else a segment.
+    fn push_lattice(g: &mut Geometry<'_>, segs: &[(Packed, Packed, u8)]) {
+        for &(a, b, shape) in segs {
+            match shape {
+                0 => {
+                    g.push_raw(a, Kind::Dot);
+                }
+                1 => {
+                    g.push_raw(a, Kind::Move);
+                    g.push_raw([b[0], a[1], a[2]], Kind::Line);
+                    g.push_raw(b, Kind::Line);
+                }
+                _ => {
+                    g.push_raw(a, Kind::Move);
+                    g.push_raw(b, Kind::Line);
+                }
+            }
+        }
+    }
+
     fn seg(g: &mut Geometry<'_>, a: [f32; 3], b: [f32; 3]) {
         g.push(Command::MoveTo(Point3::new(a[0], a[1], a[2]))).unwrap();
         g.push(Command::LineTo(Point3::new(b[0], b[1], b[2]))).unwrap();
@@ -1249,20 +1270,7 @@ mod tests {
             let mut p = store(512);
             let mut src = Geometry::new(&mut p);
             src.reset(0);
-            for &(a, b, shape) in &segs {
-                match shape {
-                    0 => { src.push_raw(a, Kind::Dot); }
-                    1 => {
-                        src.push_raw(a, Kind::Move);
-                        src.push_raw([b[0], a[1], a[2]], Kind::Line);
-                        src.push_raw(b, Kind::Line);
-                    }
-                    _ => {
-                        src.push_raw(a, Kind::Move);
-                        src.push_raw(b, Kind::Line);
-                    }
-                }
-            }
+            push_lattice(&mut src, &segs);
             // Too little room for `u32` words and a list an end: `u16`s.
             let frags = (0..src.len()).filter(|&i| src.kind(i).is_some_and(Kind::starts)).count();
             // The starts, two links a fragment, a list for every other end.
@@ -1345,20 +1353,7 @@ mod tests {
             let mut p = store(512);
             let mut one = Geometry::new(&mut p);
             one.reset(3);
-            for &(a, b, shape) in &segs {
-                match shape {
-                    0 => { one.push_raw(a, Kind::Dot); }
-                    1 => {
-                        one.push_raw(a, Kind::Move);
-                        one.push_raw([b[0], a[1], a[2]], Kind::Line);
-                        one.push_raw(b, Kind::Line);
-                    }
-                    _ => {
-                        one.push_raw(a, Kind::Move);
-                        one.push_raw(b, Kind::Line);
-                    }
-                }
-            }
+            push_lattice(&mut one, &segs);
             // The same points, the first `cut` in one store and the rest in
             // another (a polyline may straddle them).
             let cut = cut.min(one.len());

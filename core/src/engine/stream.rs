@@ -450,14 +450,26 @@ mod tests {
     use super::*;
     use crate::engine::geometry::{Kind, Source};
 
+    /// `cmds` kept in a back of `back` points and a spill of `spill`: how
+    /// many points each holds, and all of them in order (x, kind).
+    fn keep_all(back: usize, spill: usize, cmds: &[Command<Point3>]) -> ([usize; 2], Vec<(u16, Kind)>) {
+        let (mut b, mut s) = (vec![0u8; Geometry::bytes_for(back)], vec![0u8; Geometry::bytes_for(spill)]);
+        let (mut back, mut spill) = (Geometry::new(&mut b), Geometry::new(&mut s));
+        let mut keep = Keep { back: &mut back, spill: &mut spill };
+        for &c in cmds {
+            let _ = keep.command(0, c);
+        }
+        let src = Source::two(&back, &spill);
+        let got = (0..src.len()).filter_map(|i| src.get(i)).map(|(q, k)| (q[0], k)).collect();
+        ([back.len(), spill.len()], got)
+    }
+
     #[test]
     fn pieces_go_on_in_the_spill_in_order() {
         let p = |x: f32| Point3::new(x, 0.0, 0.0);
+        let (m, l, d) = (Kind::Move, Kind::Line, Kind::Dot);
         // A back of 3 points: a polyline does not start in its last slot,
         // and once the spill has a point, everything after goes there too.
-        let (mut b, mut s) = (vec![0u8; Geometry::bytes_for(3)], vec![0u8; Geometry::bytes_for(10)]);
-        let (mut back, mut spill) = (Geometry::new(&mut b), Geometry::new(&mut s));
-        let mut keep = Keep { back: &mut back, spill: &mut spill };
         let cmds = [
             Command::MoveTo(p(1.0)),
             Command::LineTo(p(2.0)),
@@ -467,25 +479,14 @@ mod tests {
             Command::MoveTo(p(6.0)),
             Command::LineTo(p(7.0)),
         ];
-        for c in cmds {
-            let _ = keep.command(0, c);
-        }
-        assert_eq!((back.len(), spill.len()), (2, 5));
-        let src = Source::two(&back, &spill);
-        let got: Vec<_> = (0..src.len()).filter_map(|i| src.get(i)).map(|(q, k)| (q[0], k)).collect();
-        let (m, l, d) = (Kind::Move, Kind::Line, Kind::Dot);
+        let (lens, got) = keep_all(3, 10, &cmds);
+        assert_eq!(lens, [2, 5]);
         assert_eq!(got, [(1, m), (2, l), (3, m), (4, l), (5, d), (6, m), (7, l)]);
         // A line that reaches the back's end goes on in the spill.
-        let (mut b, mut s) = (vec![0u8; Geometry::bytes_for(2)], vec![0u8; Geometry::bytes_for(4)]);
-        let (mut back, mut spill) = (Geometry::new(&mut b), Geometry::new(&mut s));
-        let mut keep = Keep { back: &mut back, spill: &mut spill };
-        for c in [Command::MoveTo(p(1.0)), Command::LineTo(p(2.0)), Command::LineTo(p(3.0))] {
-            let _ = keep.command(0, c);
-        }
-        let src = Source::two(&back, &spill);
-        let got: Vec<_> = (0..src.len()).filter_map(|i| src.get(i)).map(|(q, k)| (q[0], k)).collect();
+        let (lens, got) =
+            keep_all(2, 4, &[Command::MoveTo(p(1.0)), Command::LineTo(p(2.0)), Command::LineTo(p(3.0))]);
         assert_eq!(got, [(1, m), (2, l), (3, l)]);
-        assert_eq!((back.len(), spill.len()), (2, 1));
+        assert_eq!(lens, [2, 1]);
     }
 
     #[test]
