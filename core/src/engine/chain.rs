@@ -228,8 +228,9 @@ struct Index<'s, 'g> {
     /// in pairs, so this is zero when every point has an even number of
     /// ends (no open path is left to start), and all but surely not
     /// otherwise (were it zero then, the open paths left would be walked
-    /// among the closed loops: drawn all the same, in more pieces).
-    odd: u64,
+    /// among the closed loops: drawn all the same, in more pieces). `None`
+    /// once the open paths are walked: no longer kept up.
+    odd: Option<u64>,
     /// The stitch pass only ever looks up ends at exact points: its lists
     /// are buckets of a hash of the point (this many), not cells of space,
     /// so that the ends of a surface, a sheet through few of its box's
@@ -298,10 +299,10 @@ impl<'s, 'g> Index<'s, 'g> {
         for c in 0..cells {
             w.set(heads + c, NONE);
         }
-        let mut index = Self { src, w, n, bits, heads, links, frags, any_vertex, buckets, odd: 0 };
+        let mut index = Self { src, w, n, bits, heads, links, frags, any_vertex, buckets, odd: Some(0) };
         for f in 0..frags {
             index.each_slot(f, |x, s| x.link(s));
-            index.odd ^= index.ends_hash(f);
+            index.odd = index.odd.map(|h| h ^ index.ends_hash(f));
         }
         Some(index)
     }
@@ -450,8 +451,8 @@ impl<'s, 'g> Index<'s, 'g> {
     fn take(&mut self, f: usize) {
         if self.any_vertex {
             self.each_slot(f, |x, s| x.unlink(s));
-        } else {
-            self.odd ^= self.ends_hash(f);
+        } else if let Some(h) = self.odd {
+            self.odd = Some(h ^ self.ends_hash(f));
         }
         let s = self.w.get(f);
         self.w.set(f, s | DRAWN);
@@ -691,7 +692,7 @@ fn chain_on(
             // end is left: at once for a closed surface.)
             for odd in [true, false] {
                 for f in 0..x.frags {
-                    if odd && x.odd == 0 {
+                    if odd && x.odd == Some(0) {
                         break;
                     }
                     if x.drawn(f) {
@@ -719,6 +720,7 @@ fn chain_on(
                     }
                     walk.out.finish(dst, &mut stats);
                 }
+                x.odd = None;
             }
         }
     }
@@ -897,7 +899,14 @@ impl Tour {
                 let (from, to) = x.span(f);
                 let mut best = (cost(x.point(end)), end);
                 for i in from..to {
-                    let c = cost(x.point(i));
+                    let v = x.point(i);
+                    // Either jump alone surely as long as the best (as in
+                    // `two_opt`): no shorter, without a square root.
+                    let near = dist2f(prev, v).max(next.map_or(0.0, |n| dist2f(v, n)));
+                    if near * 0.999_99 >= best.0 * best.0 {
+                        continue;
+                    }
+                    let c = cost(v);
                     if c < best.0 {
                         best = (c, i);
                     }
@@ -1161,6 +1170,31 @@ mod tests {
         }
     }
 
+    /// Loop entries as they were chosen before the pruning: every vertex's
+    /// two jumps measured. The oracle of
+    /// `best_entries_prunes_without_changing_an_entry`.
+    fn best_entries_afresh(tour: &Tour, x: &mut Index<'_, '_>, start: Packed) {
+        let mut prev = start;
+        for k in 0..tour.len {
+            let (end, _) = tour.get(&x.w, k);
+            let f = x.frag_of(end);
+            if x.is_loop(f) {
+                let next = if k + 1 < tour.len { Some(tour.ends(x, k + 1).0) } else { None };
+                let cost = |v: Packed| length(prev, v) + next.map_or(0.0, |n| length(v, n));
+                let (from, to) = x.span(f);
+                let mut best = (cost(x.point(end)), end);
+                for i in from..to {
+                    let c = cost(x.point(i));
+                    if c < best.0 {
+                        best = (c, i);
+                    }
+                }
+                tour.set(&mut x.w, k, best.1, best.1);
+            }
+            prev = tour.ends(x, k).1;
+        }
+    }
+
     #[test]
     fn dist2f_is_the_exact_square_rounded_once_at_the_extremes() {
         let far = [0u16, 65535, 37837, 37838, 46341, 46340, 1, 65534];
@@ -1253,6 +1287,42 @@ mod tests {
                     tour.push(&mut x, f, end);
                 }
                 if afresh { two_opt_afresh(&tour, &mut x) } else { tour.two_opt(&mut x) }
+                tours.push((0..tour.len).map(|k| tour.get(&x.w, k)).collect::<Vec<_>>());
+            }
+            proptest::prop_assert_eq!(&tours[0], &tours[1]);
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(300))]
+        #[test]
+        fn best_entries_prunes_without_changing_an_entry(
+            loops in proptest::collection::vec(
+                (proptest::collection::vec([0u16..60, 0u16..60, 0u16..6], 3..14), 0usize..14),
+                1..30,
+            ),
+            start in [0u16..60, 0u16..60, 0u16..6],
+        ) {
+            // Loops on a coarse lattice (ties between vertices are common),
+            // each entered at some vertex, in the order given.
+            let mut p = store(512);
+            let mut src = Geometry::new(&mut p);
+            src.reset(0);
+            for (pts, _) in &loops {
+                for (n, &q) in pts.iter().enumerate() {
+                    src.push_raw(q, if n == 0 { Kind::Loop } else { Kind::Line });
+                }
+            }
+            let mut tours = Vec::new();
+            for afresh in [false, true] {
+                let mut scratch = vec![0u8; 64 * 1024];
+                let mut x = Index::build(Source::one(&src), &mut scratch, true, false).expect("room");
+                let mut tour = Tour { base: x.tour_base(), len: 0 };
+                for (f, (_, at)) in loops.iter().enumerate() {
+                    let (from, to) = x.span(f);
+                    tour.push(&mut x, f, from + at % (to - from));
+                }
+                if afresh { best_entries_afresh(&tour, &mut x, start) } else { tour.best_entries(&mut x, start) }
                 tours.push((0..tour.len).map(|k| tour.get(&x.w, k)).collect::<Vec<_>>());
             }
             proptest::prop_assert_eq!(&tours[0], &tours[1]);
