@@ -50,9 +50,62 @@ pub(crate) fn sqrt(x: f32) -> f32 {
     s
 }
 
+/// `roundf(x)` (halves away from zero) clamped into `0..=65535`, NaN to
+/// 0: a point's fixed-point code. `libm`'s `roundf` is software on
+/// `thumbv7em`; here a conversion, a subtraction (`x` less its truncation
+/// is exact below 2^23) and a compare.
+#[inline]
+pub(crate) fn round_u16(x: f32) -> u16 {
+    if x >= 65_534.5 {
+        u16::MAX
+    } else if x > 0.0 {
+        let t = x as u32;
+        (t + u32::from(x - t as f32 >= 0.5)) as u16
+    } else {
+        0 // negative, zero, NaN: roundf gives 0 or less
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// What `round_u16` stands for.
+    fn round_u16_libm(x: f32) -> u16 {
+        let r = libm::roundf(x);
+        if r >= 65535.0 {
+            u16::MAX
+        } else if r > 0.0 {
+            r as u16
+        } else {
+            0
+        }
+    }
+
+    #[test]
+    fn round_u16_matches_libm_at_every_half_and_across_the_range() {
+        let check = |x: f32| assert_eq!(round_u16(x), round_u16_libm(x), "round_u16({x:e})");
+        // Every float within 40 ulps of each half and each whole number.
+        for n in 0..=65_536u32 {
+            for v in [n as f32, n as f32 + 0.5] {
+                let b = v.to_bits();
+                for b in b.saturating_sub(40)..=b + 40 {
+                    check(f32::from_bits(b));
+                }
+            }
+        }
+        // A stride through every positive float up to infinity, and a few
+        // negative ones.
+        let mut b = 0u32;
+        while b <= f32::INFINITY.to_bits() {
+            check(f32::from_bits(b));
+            check(-f32::from_bits(b));
+            b += 997;
+        }
+        for v in [0.0f32, -0.0, 0.5, -0.5, 65_534.5, 65_535.0, f32::INFINITY, f32::NEG_INFINITY, f32::NAN] {
+            check(v);
+        }
+    }
 
     #[test]
     fn hot_path_sqrt_and_ceil_match_libm() {

@@ -154,16 +154,7 @@ impl<'a> Geometry<'a> {
     /// `p` in the fixed point of `shift` (clamped to the `u16` range).
     pub fn quantise_with(shift: u8, p: Point3) -> Packed {
         let k = f32::from(1u16 << shift.min(12));
-        let q = |v: f32| {
-            let r = libm::roundf(v * k);
-            if r >= 65535.0 {
-                0xFFFF
-            } else if r > 0.0 {
-                r as u16
-            } else {
-                0
-            }
-        };
+        let q = |v: f32| crate::fastmath::round_u16(v * k);
         [q(p.x), q(p.y), q(p.z)]
     }
 

@@ -170,10 +170,23 @@ fn widen<const N: usize>(
     out: &mut [f32],
     from: impl Fn([u8; N]) -> f32,
 ) {
-    let samples = bytes.as_chunks::<N>().0;
-    let mut at = samples.get(start..).unwrap_or(&[]).iter().step_by(stride.max(1));
-    for o in out.iter_mut() {
-        *o = at.next().map_or(f32::NAN, |b| from(*b));
+    let samples = bytes.as_chunks::<N>().0.get(start..).unwrap_or(&[]);
+    // A plain loop for a row, chunks for a column (a `step_by` iterator
+    // costs a call to `nth` a sample).
+    let mut n = 0;
+    if stride <= 1 {
+        for (o, b) in out.iter_mut().zip(samples) {
+            *o = from(*b);
+            n += 1;
+        }
+    } else {
+        for (o, c) in out.iter_mut().zip(samples.chunks(stride)) {
+            *o = c.first().map_or(f32::NAN, |b| from(*b));
+            n += 1;
+        }
+    }
+    if let Some(rest) = out.get_mut(n..) {
+        rest.fill(f32::NAN);
     }
 }
 
@@ -501,5 +514,31 @@ mod tests {
         assert_eq!(out[..2], [-2.0, -32768.0]);
         decode(SampleType::F32, &1.5f32.to_le_bytes(), 0, 1, &mut out[..1]);
         assert_eq!(out[0], 1.5);
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn decode_takes_every_stride_th_sample_and_nan_past_the_end(
+            bytes in proptest::collection::vec(proptest::num::u8::ANY, 0..200),
+            start in 0usize..60,
+            stride in 0usize..9,
+            n in 0usize..50,
+        ) {
+            for ty in SampleType::ALL {
+                let size = ty.size();
+                let mut out = vec![0.0f32; n];
+                decode(ty, &bytes, start, stride, &mut out);
+                for (k, &got) in out.iter().enumerate() {
+                    let at = (start + k * stride.max(1)) * size;
+                    let want = bytes.get(at..at + size).map_or(f32::NAN, |b| match ty {
+                        SampleType::U8 => f32::from(b[0]),
+                        SampleType::U16 => f32::from(u16::from_le_bytes([b[0], b[1]])),
+                        SampleType::I16 => f32::from(i16::from_le_bytes([b[0], b[1]])),
+                        SampleType::F32 => f32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+                    });
+                    proptest::prop_assert_eq!(got.to_bits(), want.to_bits(), "{:?} sample {}", ty, k);
+                }
+            }
+        }
     }
 }
