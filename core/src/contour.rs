@@ -163,7 +163,6 @@ pub fn contour_subgrid<P, S: CommandSink<P>>(
 #[derive(Debug)]
 pub struct RowContourer<'l> {
     sweep: Sweep<'l>,
-    scratch: Scratch,
 }
 
 impl<'l> RowContourer<'l> {
@@ -173,7 +172,7 @@ impl<'l> RowContourer<'l> {
     /// [`ContourError::NonFiniteLevel`].
     pub fn new<E>(levels: &'l [f32], traversal: Traversal) -> Result<Self, ContourError<E>> {
         check_levels(levels)?;
-        Ok(Self { sweep: Sweep::new(levels, traversal), scratch: Scratch::new() })
+        Ok(Self { sweep: Sweep::new(levels, traversal) })
     }
 
     /// Contour the cells between the sample rows `lower` (grid row `j`) and
@@ -197,15 +196,7 @@ impl<'l> RowContourer<'l> {
             let n = (nx - 1 - i0).min(BLOCK);
             let r0 = lower.get(i0..=i0 + n).unwrap_or(&[]);
             let r1 = upper.get(i0..=i0 + n).unwrap_or(&[]);
-            let (l0, l1) = (r0.get(1..).unwrap_or(&[]), r1.get(1..).unwrap_or(&[]));
-            self.sweep.run(
-                [r0, l0, l1, r1],
-                &mut self.scratch.busy,
-                |k| Placement::new(i0 + k, j),
-                |_, x, y| place(x, y),
-                sink,
-                stats,
-            )?;
+            self.sweep.run_rows(r0, r1, |k| Placement::new(i0 + k, j), |_, x, y| place(x, y), sink, stats)?;
             i0 += n;
         }
         stats.cells += nx.saturating_sub(1) as u64;
@@ -259,16 +250,8 @@ pub fn contour_rows<T: Sample, P, S: CommandSink<P>>(
             let [b0, b1, ..] = &mut scratch.bufs;
             let r0 = lane(data, start, sx, n + 1, b0);
             let r1 = lane(data, start + sy, sx, n + 1, b1);
-            let (l0, l1) = (r0.get(1..).unwrap_or(&[]), r1.get(1..).unwrap_or(&[]));
             sweep
-                .run(
-                    [r0, l0, l1, r1],
-                    &mut scratch.busy,
-                    |k| Placement::new(i0 + k, j),
-                    |_, x, y| place(x, y),
-                    sink,
-                    &mut stats,
-                )
+                .run_rows(r0, r1, |k| Placement::new(i0 + k, j), |_, x, y| place(x, y), sink, &mut stats)
                 .map_err(ContourError::Sink)?;
             i0 += n;
         }

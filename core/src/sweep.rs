@@ -79,6 +79,68 @@ fn mark(out: &mut [u8], [a, b, c, d]: [&[f32]; 4], klo: f32, khi: f32) {
     }
 }
 
+/// A float's bits as an integer in the same order (`-0.0` just below
+/// `+0.0`, NaNs beyond the infinities): an integer compare instead of a
+/// float compare and a move of the flags on the MCU.
+#[inline(always)]
+fn key(v: f32) -> i32 {
+    let b = v.to_bits() as i32;
+    b ^ ((b >> 31) & 0x7FFF_FFFF)
+}
+
+/// Keys strictly between `lo` and `hi` (`lo < hi`): one subtraction and
+/// one unsigned compare.
+#[derive(Debug, Clone, Copy)]
+struct Between {
+    lo: i32,
+    span: u32,
+}
+
+impl Between {
+    fn new(lo: i32, hi: i32) -> Self {
+        Self { lo, span: (hi.wrapping_sub(lo) as u32).wrapping_sub(1) }
+    }
+
+    #[inline(always)]
+    fn has(self, k: i32) -> bool {
+        (k.wrapping_sub(self.lo) as u32).wrapping_sub(1) < self.span
+    }
+}
+
+/// Words of sample bits a row pair's block takes (`BLOCK + 1` samples).
+const WORDS: usize = BLOCK / 32 + 1;
+
+/// Bits of the samples of `row` (bit `k % 32` of word `k / 32`) that lie
+/// in `range`.
+#[inline(always)]
+fn bits(row: &[f32], range: Between) -> [u32; WORDS] {
+    let mut out = [0u32; WORDS];
+    for (w, chunk) in out.iter_mut().zip(row.chunks(32)) {
+        for (k, &v) in chunk.iter().enumerate() {
+            *w |= u32::from(range.has(key(v))) << k;
+        }
+    }
+    out
+}
+
+/// The cells between `lower` and `upper` whose four corners all lie in
+/// `range`: bit `k` is cell `k` (corners `k` and `k + 1` of both rows).
+#[inline(always)]
+fn all_four(lower: &[f32], upper: &[f32], range: Between) -> [u32; WORDS] {
+    let mut both = bits(lower, range);
+    for (b, u) in both.iter_mut().zip(bits(upper, range)) {
+        *b &= u;
+    }
+    // And with itself one sample on (bit `k + 1` at `k`, across words).
+    let mut next_word = 0u32;
+    for b in both.iter_mut().rev() {
+        let w = *b;
+        *b = w & ((w >> 1) | (next_word << 31));
+        next_word = w;
+    }
+    both
+}
+
 /// Scratch space for one block: lane buffers for samples that need
 /// converting, and the marks.
 #[derive(Debug)]
@@ -100,6 +162,9 @@ pub(crate) struct Sweep<'l> {
     pub traversal: Traversal,
     klo: f32,
     khi: f32,
+    /// Finite samples above every level, and below every level.
+    above: Between,
+    below: Between,
 }
 
 impl<'l> Sweep<'l> {
@@ -107,7 +172,53 @@ impl<'l> Sweep<'l> {
     pub(crate) fn new(levels: &'l [f32], traversal: Traversal) -> Self {
         let (klo, khi) =
             levels.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &l| (a.min(l), b.max(l)));
-        Self { levels, traversal, klo, khi }
+        // Above `khi` in the float order (`-0.0` is not above `0.0`) and
+        // below `klo` (`0.0` is not below `-0.0`), and finite.
+        let above = Between::new(key(khi + 0.0), key(f32::INFINITY));
+        let below = Between::new(key(f32::NEG_INFINITY), key(if klo == 0.0 { -0.0 } else { klo }));
+        Self { levels, traversal, klo, khi, above, below }
+    }
+
+    /// [`Sweep::run`] for the cells between two rows of samples: cell `k`
+    /// has corners `lower[k], lower[k + 1], upper[k + 1], upper[k]` (the
+    /// shorter row, up to `BLOCK + 1` samples, sets the cells). The cells
+    /// no level meets are found from two bits a sample (above every level,
+    /// below every level; a non-finite sample is neither), 32 cells a word,
+    /// instead of four corners a cell.
+    #[inline(always)]
+    pub(crate) fn run_rows<P, S: CommandSink<P>>(
+        &self,
+        lower: &[f32],
+        upper: &[f32],
+        at: impl Fn(usize) -> Placement,
+        place: impl Fn(usize, f32, f32) -> P,
+        sink: &mut S,
+        stats: &mut ContourStats,
+    ) -> Result<(), S::Error> {
+        let samples = lower.len().min(upper.len()).min(BLOCK + 1);
+        let (lower, upper) = (lower.get(..samples).unwrap_or(&[]), upper.get(..samples).unwrap_or(&[]));
+        let cells = samples.saturating_sub(1);
+        let above = all_four(lower, upper, self.above);
+        let below = all_four(lower, upper, self.below);
+        for (w, (above, below)) in above.into_iter().zip(below).enumerate() {
+            let first = 32 * w;
+            if first >= cells {
+                break;
+            }
+            let valid = if cells - first >= 32 { u32::MAX } else { (1u32 << (cells - first)) - 1 };
+            let mut busy = !(above | below) & valid;
+            while busy != 0 {
+                let k = first + busy.trailing_zeros() as usize;
+                busy &= busy - 1;
+                let (Some(&a), Some(&b), Some(&c), Some(&d)) =
+                    (lower.get(k), lower.get(k + 1), upper.get(k + 1), upper.get(k))
+                else {
+                    continue;
+                };
+                self.cell([a, b, c, d], at(k), &|x, y| place(k, x, y), sink, stats)?;
+            }
+        }
+        Ok(())
     }
 
     /// Contour the cells of a block: cell `k` has corners `ll[k], lr[k],
@@ -170,5 +281,75 @@ impl<'l> Sweep<'l> {
         stats.crossing_cells += u64::from(sent > 0);
         stats.commands += sent;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::command::Command;
+    use proptest::prelude::*;
+
+    /// A cell's index and a point.
+    type Placed = (usize, f32, f32);
+
+    /// Records every command with its level.
+    struct Record(Vec<(usize, Command<Placed>)>);
+
+    impl CommandSink<Placed> for Record {
+        type Error = core::convert::Infallible;
+        fn command(&mut self, level: usize, c: Command<Placed>) -> Result<(), Self::Error> {
+            self.0.push((level, c));
+            Ok(())
+        }
+    }
+
+    /// Samples where the two ways of finding quiet cells could part: the
+    /// levels themselves, signed zeros, non-finite and huge values.
+    fn sample() -> impl Strategy<Value = f32> {
+        prop_oneof![
+            2 => -3.0f32..3.0,
+            1 => prop::sample::select(vec![
+                0.0f32, -0.0, 1.0, -1.0, 0.5, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, f32::MAX, -f32::MAX,
+                f32::MIN_POSITIVE, -1e-45,
+            ]),
+        ]
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(400))]
+        #[test]
+        fn rows_find_the_cells_four_lanes_find(
+            lower in prop::collection::vec(sample(), 0..=BLOCK + 1),
+            upper in prop::collection::vec(sample(), 0..=BLOCK + 1),
+            levels in prop::collection::vec(prop::sample::select(vec![0.0f32, -0.0, 0.5, 1.0, -1.0, 2.5]), 1..3),
+        ) {
+            let sweep = Sweep::new(&levels, Traversal::Corrected);
+            let place = |k: usize, x: f32, y: f32| (k, x, y);
+            let at = |k: usize| Placement::new(k, 7);
+            let (mut rows, mut lanes) = (Record(Vec::new()), Record(Vec::new()));
+            let (mut rows_stats, mut lanes_stats) = (ContourStats::default(), ContourStats::default());
+            let _ = sweep.run_rows(&lower, &upper, at, place, &mut rows, &mut rows_stats);
+            let n = lower.len().min(upper.len()).min(BLOCK + 1);
+            let (r0, r1) = (&lower[..n], &upper[..n]);
+            let (l0, l1) = (r0.get(1..).unwrap_or(&[]), r1.get(1..).unwrap_or(&[]));
+            let mut busy = [0u8; BLOCK];
+            let _ = sweep.run([r0, l0, l1, r1], &mut busy, at, place, &mut lanes, &mut lanes_stats);
+            let bits = |r: &Record| r.0.iter().map(|(l, c)| (*l, c.map(|(k, x, y)| (k, x.to_bits(), y.to_bits())))).collect::<Vec<_>>();
+            prop_assert_eq!(bits(&rows), bits(&lanes));
+            prop_assert_eq!(rows_stats, lanes_stats);
+            // And exactly the quiet cells are found quiet (a busy cell
+            // taken for quiet is lost; the converse only costs time).
+            let cells = n.saturating_sub(1);
+            let (klo, khi) = levels.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &l| (a.min(l), b.max(l)));
+            let above = all_four(r0, r1, sweep.above);
+            let below = all_four(r0, r1, sweep.below);
+            for k in 0..cells {
+                let corners = [r0[k], r0[k + 1], r1[k + 1], r1[k]];
+                let all = |f: &dyn Fn(f32) -> bool| corners.iter().all(|&v| v.is_finite() && f(v));
+                prop_assert_eq!(above[k / 32] >> (k % 32) & 1 == 1, all(&|v| v > khi), "cell {} above", k);
+                prop_assert_eq!(below[k / 32] >> (k % 32) & 1 == 1, all(&|v| v < klo), "cell {} below", k);
+            }
+        }
     }
 }
