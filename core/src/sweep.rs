@@ -92,53 +92,58 @@ fn key(v: f32) -> i32 {
 /// one unsigned compare.
 #[derive(Debug, Clone, Copy)]
 struct Between {
-    lo: i32,
+    /// `lo + 1`.
+    from: i32,
+    /// Keys from `from` on that are in.
     span: u32,
 }
 
 impl Between {
     fn new(lo: i32, hi: i32) -> Self {
-        Self { lo, span: (hi.wrapping_sub(lo) as u32).wrapping_sub(1) }
+        Self { from: lo.wrapping_add(1), span: (hi.wrapping_sub(lo) as u32).wrapping_sub(1) }
     }
 
     #[inline(always)]
-    fn has(self, k: i32) -> bool {
-        (k.wrapping_sub(self.lo) as u32).wrapping_sub(1) < self.span
+    fn has(self, k: i32) -> u32 {
+        u32::from((k.wrapping_sub(self.from) as u32) < self.span)
     }
 }
 
 /// Words of sample bits a row pair's block takes (`BLOCK + 1` samples).
 const WORDS: usize = BLOCK / 32 + 1;
 
-/// Bits of the samples of `row` (bit `k % 32` of word `k / 32`) that lie
-/// in `range`.
+/// The cells between `lower` and `upper` (of equal length) whose four
+/// corners all lie in `above`, and those whose four all lie in `below`:
+/// bit `k % 32` of word `k / 32` is cell `k` (corners `k` and `k + 1` of
+/// both rows).
 #[inline(always)]
-fn bits(row: &[f32], range: Between) -> [u32; WORDS] {
-    let mut out = [0u32; WORDS];
-    for (w, chunk) in out.iter_mut().zip(row.chunks(32)) {
-        for (k, &v) in chunk.iter().enumerate() {
-            *w |= u32::from(range.has(key(v))) << k;
+fn all_four(lower: &[f32], upper: &[f32], above: Between, below: Between) -> [[u32; WORDS]; 2] {
+    // First the columns (both samples in), one word of 32 at a time, shifted
+    // in from the top so that sample `k` lands on bit `k`.
+    let mut out = [[0u32; WORDS]; 2];
+    let [a_out, b_out] = &mut out;
+    for (((a_w, b_w), l), u) in
+        a_out.iter_mut().zip(b_out.iter_mut()).zip(lower.chunks(32)).zip(upper.chunks(32))
+    {
+        let (mut a, mut b) = (0u32, 0u32);
+        for (&l, &u) in l.iter().zip(u).rev() {
+            let (kl, ku) = (key(l), key(u));
+            a = (a << 1) | (above.has(kl) & above.has(ku));
+            b = (b << 1) | (below.has(kl) & below.has(ku));
+        }
+        (*a_w, *b_w) = (a, b);
+    }
+    // Then a cell is its column and the next (bit `k + 1` at `k`, across
+    // words).
+    for words in &mut out {
+        let mut next_word = 0u32;
+        for w in words.iter_mut().rev() {
+            let c = *w;
+            *w = c & ((c >> 1) | (next_word << 31));
+            next_word = c;
         }
     }
     out
-}
-
-/// The cells between `lower` and `upper` whose four corners all lie in
-/// `range`: bit `k` is cell `k` (corners `k` and `k + 1` of both rows).
-#[inline(always)]
-fn all_four(lower: &[f32], upper: &[f32], range: Between) -> [u32; WORDS] {
-    let mut both = bits(lower, range);
-    for (b, u) in both.iter_mut().zip(bits(upper, range)) {
-        *b &= u;
-    }
-    // And with itself one sample on (bit `k + 1` at `k`, across words).
-    let mut next_word = 0u32;
-    for b in both.iter_mut().rev() {
-        let w = *b;
-        *b = w & ((w >> 1) | (next_word << 31));
-        next_word = w;
-    }
-    both
 }
 
 /// Scratch space for one block: lane buffers for samples that need
@@ -198,8 +203,7 @@ impl<'l> Sweep<'l> {
         let samples = lower.len().min(upper.len()).min(BLOCK + 1);
         let (lower, upper) = (lower.get(..samples).unwrap_or(&[]), upper.get(..samples).unwrap_or(&[]));
         let cells = samples.saturating_sub(1);
-        let above = all_four(lower, upper, self.above);
-        let below = all_four(lower, upper, self.below);
+        let [above, below] = all_four(lower, upper, self.above, self.below);
         for (w, (above, below)) in above.into_iter().zip(below).enumerate() {
             let first = 32 * w;
             if first >= cells {
@@ -342,8 +346,7 @@ mod tests {
             // taken for quiet is lost; the converse only costs time).
             let cells = n.saturating_sub(1);
             let (klo, khi) = levels.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &l| (a.min(l), b.max(l)));
-            let above = all_four(r0, r1, sweep.above);
-            let below = all_four(r0, r1, sweep.below);
+            let [above, below] = all_four(r0, r1, sweep.above, sweep.below);
             for k in 0..cells {
                 let corners = [r0[k], r0[k + 1], r1[k + 1], r1[k]];
                 let all = |f: &dyn Fn(f32) -> bool| corners.iter().all(|&v| v.is_finite() && f(v));
