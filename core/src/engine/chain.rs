@@ -149,13 +149,14 @@ impl<'s> Words<'s> {
 }
 
 fn dist2(a: Packed, b: Packed) -> u64 {
-    a.iter()
-        .zip(b)
-        .map(|(&a, b)| {
-            let d = i64::from(a) - i64::from(b);
-            (d * d) as u64
-        })
-        .sum()
+    // Each square of a `u16` difference fits a `u32` (a 32-bit multiply on
+    // the MCU), their sum may not.
+    let sq = |a: u16, b: u16| {
+        let d = u32::from(a.abs_diff(b));
+        u64::from(d * d)
+    };
+    let ([ax, ay, az], [bx, by, bz]) = (a, b);
+    sq(ax, bx) + sq(ay, by) + sq(az, bz)
 }
 
 /// [`dist2`] as an `f32` (rounded to nearest): summed in `u32` when it
@@ -245,10 +246,16 @@ impl<'s, 'g> Index<'s, 'g> {
         let mut frags = 0usize;
         let mut top = [0u16; 3];
         for i in 0..points {
-            let (q, kind) = src.get(i)?;
-            for (t, v) in top.iter_mut().zip(q) {
-                *t = (*t).max(v);
-            }
+            // The stitch pass's buckets need no extent: the kinds alone.
+            let kind = if hashed {
+                src.kind(i)?
+            } else {
+                let (q, kind) = src.get(i)?;
+                for (t, v) in top.iter_mut().zip(q) {
+                    *t = (*t).max(v);
+                }
+                kind
+            };
             if kind.starts() || i == 0 {
                 frags += 1;
             }
@@ -291,7 +298,7 @@ impl<'s, 'g> Index<'s, 'g> {
         }
         let mut k = 0;
         for i in 0..points {
-            if src.get(i).is_some_and(|(_, kind)| kind.starts()) || i == 0 {
+            if src.kind(i).is_some_and(Kind::starts) || i == 0 {
                 w.set(k, i as u32);
                 k += 1;
             }
@@ -508,10 +515,17 @@ impl<'s, 'g> Index<'s, 'g> {
         let dir_in = prev.map(|p| unit(p, cur));
         let mut best: Option<(f32, (usize, usize))> = None;
         self.each_end(self.cell(cur), |s| {
-            let i = self.end_point(s);
+            let f = self.end_frag(s);
+            let (from, to) = self.span(f);
+            // `end_point`, from the span already read.
+            let i = if self.any_vertex {
+                s
+            } else if s & 1 == 0 {
+                from
+            } else {
+                to - 1
+            };
             if self.point(i) == cur && self.kind(i) != Kind::Dot {
-                let f = self.end_frag(s);
-                let (from, to) = self.span(f);
                 let next = if i == from { (from + 1).min(to - 1) } else { i.saturating_sub(1).max(from) };
                 let score = dir_in.map_or(0.0, |d| {
                     let u = unit(cur, self.point(next));
@@ -532,31 +546,36 @@ impl<'s, 'g> Index<'s, 'g> {
         let [nx, ny, nz] = self.n.map(|n| n as i32);
         let side = 1u64 << self.bits;
         let mut best: Option<(u64, usize)> = None;
+        // The ends of one cell: whether one lies at `cur` (then it is the
+        // nearest).
+        let visit = |cell: i32, best: &mut Option<(u64, usize)>| {
+            self.each_end(cell as usize, |s| {
+                let i = self.end_point(s);
+                let d = dist2(cur, self.point(i));
+                if best.is_none_or(|(bd, _)| d < bd) {
+                    *best = Some((d, i));
+                }
+                d != 0
+            });
+            best.is_some_and(|(d, _)| d == 0)
+        };
         for r in 0..=RINGS {
-            for dz in -r..=r {
-                for dy in -r..=r {
-                    // The shell of ring r only: inside its faces, just the
-                    // two cells at dx = -r and dx = r (the order the full
-                    // cube would visit them in).
-                    let face = dz.abs() == r || dy.abs() == r;
-                    let step = if face || r == 0 { 1 } else { 2 * r as usize };
-                    for dx in (-r..=r).step_by(step) {
-                        let (x, y, z) = (cx + dx, cy + dy, cz + dz);
-                        if !((0..nx).contains(&x) && (0..ny).contains(&y) && (0..nz).contains(&z)) {
-                            continue;
-                        }
-                        let cell = (x + nx * (y + ny * z)) as usize;
-                        self.each_end(cell, |s| {
-                            let i = self.end_point(s);
-                            let d = dist2(cur, self.point(i));
-                            if best.is_none_or(|(bd, _)| d < bd) {
-                                best = Some((d, i));
-                            }
-                            d != 0
-                        });
-                        if best.is_some_and(|(d, _)| d == 0) {
-                            return best.map(|(_, i)| i);
-                        }
+            // The shell of ring r inside the grid, in the order of z, y,
+            // then x: inside its faces, just the two cells at x = cx - r
+            // and x = cx + r.
+            let (x0, x1) = ((cx - r).max(0), (cx + r).min(nx - 1));
+            for z in (cz - r).max(0)..=(cz + r).min(nz - 1) {
+                for y in (cy - r).max(0)..=(cy + r).min(ny - 1) {
+                    let row = nx * (y + ny * z);
+                    let face = (z - cz).abs() == r || (y - cy).abs() == r;
+                    let found = if face || r == 0 {
+                        (x0..=x1).any(|x| visit(row + x, &mut best))
+                    } else {
+                        (cx - r >= 0 && visit(row + cx - r, &mut best))
+                            || (cx + r < nx && visit(row + cx + r, &mut best))
+                    };
+                    if found {
+                        return best.map(|(_, i)| i);
                     }
                 }
             }
