@@ -23,14 +23,16 @@
 //!
 //! Memory, in caller scratch (the engine lends the slice buffers, idle
 //! between volumes): the fragment starts and a grid of ends (a singly
-//! linked list per cell: in the order pass one link a point, about 6.6
-//! bytes a point; in the stitch pass two a fragment, about 5 bytes a point
-//! of 3.4-point pieces), all `u32`; the stitch pass, when that is more than
-//! the scratch, keeps them in `u16`s (surfaces under 32,767 points), half
-//! that.
-//! Time: `O(n)` to build, and per fragment a search of the cells within two
-//! rings of the beam, else the next non-empty cell in scan order (a cursor
-//! that only moves on, `O(cells)` in all).
+//! linked list per cell: in the order pass one link a point and a bit a
+//! point for the drawn ones, about 6.7 bytes a point; in the stitch pass
+//! two a fragment, about 5 bytes a point of 3.4-point pieces), all `u32`;
+//! the stitch pass, when that is more than the scratch, keeps them in
+//! `u16`s (surfaces under 32,767 points), half that. Drawn ends stay in
+//! their lists and are passed over (the order pass takes them out of a
+//! list as it searches it), so drawing a fragment costs no list walks.
+//! Time: `O(n)` to build, and per fragment a search of the cells within
+//! [`RINGS`] rings of the beam, else the next cell in scan order with an
+//! end left (a cursor that only moves on, `O(cells)` in all).
 
 use super::geometry::{Geometry, Kind, Packed, Source};
 use crate::fastmath::sqrt;
@@ -217,10 +219,12 @@ struct Index<'s, 'g> {
     /// Cells along x, y, z; a cell is `2^bits` codes on a side.
     n: [u32; 3],
     bits: u32,
-    /// Word offsets: fragment starts (`frags` of them), cell heads, and one
-    /// link a slot.
+    /// Word offsets: fragment starts (`frags` of them), cell heads, one
+    /// link a slot, and (the order pass, after its tour) a bit a point for
+    /// the drawn ones.
     heads: usize,
     links: usize,
+    dead: usize,
     frags: usize,
     /// Closed loops may be entered at any vertex.
     any_vertex: bool,
@@ -279,7 +283,10 @@ impl<'s, 'g> Index<'s, 'g> {
         // fragments, the links and the tour: two ends a fragment, or every
         // point of the loops.
         let tour = if any_vertex { TOUR_WORDS * frags } else { 0 };
-        let spare = words.saturating_sub(fixed + tour) as u64;
+        // The order pass's drawn points, a bit each in (wide) words after
+        // the tour.
+        let dead_words = if any_vertex { points.div_ceil(32) } else { 0 };
+        let spare = words.saturating_sub(fixed + tour + dead_words) as u64;
         let budget = spare.min((ends as u64 * 2).max(1)).max(1);
         let cells_at = |b: u32| -> u64 { top.iter().map(|&t| u64::from((u32::from(t) >> b) + 1)).product() };
         let mut bits = 0u32;
@@ -293,8 +300,12 @@ impl<'s, 'g> Index<'s, 'g> {
         let links = heads + cells;
         // The order pass keeps its tour ([`TOUR_WORDS`] a fragment) after
         // the links.
-        if links + slots + tour > words {
+        if links + slots + tour + dead_words > words {
             return None;
+        }
+        let dead = links + slots + tour;
+        for d in dead..dead + dead_words {
+            w.set(d, 0);
         }
         let mut k = 0;
         for i in 0..points {
@@ -306,7 +317,8 @@ impl<'s, 'g> Index<'s, 'g> {
         for c in 0..cells {
             w.set(heads + c, NONE);
         }
-        let mut index = Self { src, w, n, bits, heads, links, frags, any_vertex, buckets, odd: Some(0) };
+        let mut index =
+            Self { src, w, n, bits, heads, links, dead, frags, any_vertex, buckets, odd: Some(0) };
         for f in 0..frags {
             index.each_slot(f, |x, s| x.link(s));
             index.odd = index.odd.map(|h| h ^ index.ends_hash(f));
@@ -432,32 +444,54 @@ impl<'s, 'g> Index<'s, 'g> {
         self.w.set(self.heads + c, s as u32);
     }
 
-    fn unlink(&mut self, s: usize) {
-        let c = self.cell(self.point(self.end_point(s)));
+    /// The order pass: whether point `s`'s fragment is drawn.
+    #[inline]
+    fn dead(&self, s: usize) -> bool {
+        self.w.get(self.dead + s / 32) >> (s % 32) & 1 != 0
+    }
+
+    /// The order pass: take the drawn ends out of cell `c`'s list (each is
+    /// passed over once, not looked for when its loop is drawn).
+    fn prune(&mut self, c: usize) {
         let mut prev = NONE;
         let mut at = self.w.get(self.heads + c);
         while at != NONE {
             let next = self.w.get(self.links + at as usize);
-            if at as usize == s {
+            if self.dead(at as usize) {
                 if prev == NONE {
                     self.w.set(self.heads + c, next);
                 } else {
                     self.w.set(self.links + prev as usize, next);
                 }
-                return;
+            } else {
+                prev = at;
             }
-            prev = at;
             at = next;
         }
     }
 
-    /// Mark fragment `f` drawn and take its ends out of the grid (in the
-    /// stitch pass they stay in their lists, passed over as drawn: a list
-    /// there is the ends at a point or two, and finding an end's
-    /// predecessor cost more than passing it).
+    /// The order pass: mark points `from..to` drawn, a word at a time.
+    fn kill(&mut self, from: usize, to: usize) {
+        let mut s = from;
+        while s < to {
+            let bit = s % 32;
+            let n = (32 - bit).min(to - s);
+            let mask = if n == 32 { u32::MAX } else { ((1u32 << n) - 1) << bit };
+            let at = self.dead + s / 32;
+            let v = self.w.get(at);
+            self.w.set(at, v | mask);
+            s += n;
+        }
+    }
+
+    /// Mark fragment `f` drawn. Its ends stay in their lists, passed over
+    /// as drawn (in the stitch pass a list is the ends at a point or two;
+    /// in the order pass a loop has an end a vertex, and finding each one's
+    /// predecessor cost more than passing them).
     fn take(&mut self, f: usize) {
         if self.any_vertex {
-            self.each_slot(f, |x, s| x.unlink(s));
+            let (from, to) = self.span(f);
+            self.kill(from, to);
         } else if let Some(h) = self.odd {
             self.odd = Some(h ^ self.ends_hash(f));
         }
@@ -481,7 +515,8 @@ impl<'s, 'g> Index<'s, 'g> {
         let mut at = self.w.get(self.heads + c);
         while at != NONE {
             let s = at as usize;
-            if (self.any_vertex || !self.drawn(s / 2)) && !visit(s) {
+            let live = if self.any_vertex { !self.dead(s) } else { !self.drawn(s / 2) };
+            if live && !visit(s) {
                 return;
             }
             at = self.w.get(self.links + s);
@@ -541,17 +576,18 @@ impl<'s, 'g> Index<'s, 'g> {
     }
 
     /// The end nearest `cur` within [`RINGS`] rings of cells.
-    fn nearest(&self, cur: Packed) -> Option<usize> {
+    fn nearest(&mut self, cur: Packed) -> Option<usize> {
         let [cx, cy, cz] = cell_coords(cur, self.n, self.bits).map(|c| c as i32);
         let [nx, ny, nz] = self.n.map(|n| n as i32);
         let side = 1u64 << self.bits;
         let mut best: Option<(u64, usize)> = None;
-        // The ends of one cell: whether one lies at `cur` (then it is the
-        // nearest).
-        let visit = |cell: i32, best: &mut Option<(u64, usize)>| {
-            self.each_end(cell as usize, |s| {
-                let i = self.end_point(s);
-                let d = dist2(cur, self.point(i));
+        // The ends of one cell (its drawn ones taken out of the list
+        // first): whether one lies at `cur` (then it is the nearest).
+        let visit = |x: &mut Self, cell: i32, best: &mut Option<(u64, usize)>| {
+            x.prune(cell as usize);
+            x.each_end(cell as usize, |s| {
+                let i = x.end_point(s);
+                let d = dist2(cur, x.point(i));
                 if best.is_none_or(|(bd, _)| d < bd) {
                     *best = Some((d, i));
                 }
@@ -569,10 +605,10 @@ impl<'s, 'g> Index<'s, 'g> {
                     let row = nx * (y + ny * z);
                     let face = (z - cz).abs() == r || (y - cy).abs() == r;
                     let found = if face || r == 0 {
-                        (x0..=x1).any(|x| visit(row + x, &mut best))
+                        (x0..=x1).any(|x| visit(self, row + x, &mut best))
                     } else {
-                        (cx - r >= 0 && visit(row + cx - r, &mut best))
-                            || (cx + r < nx && visit(row + cx + r, &mut best))
+                        (cx - r >= 0 && visit(self, row + cx - r, &mut best))
+                            || (cx + r < nx && visit(self, row + cx + r, &mut best))
                     };
                     if found {
                         return best.map(|(_, i)| i);
@@ -590,13 +626,17 @@ impl<'s, 'g> Index<'s, 'g> {
         best.map(|(_, i)| i)
     }
 
-    /// The first end in a non-empty cell at or after the cursor (cells
-    /// before it are empty for good: ends are only ever taken out).
+    /// The first end not drawn at or after the cursor's cell (cells before
+    /// it have none for good: ends are only ever drawn).
     fn first_from(&self, scan: &mut usize) -> Option<usize> {
         while *scan < self.cells() {
-            let at = self.w.get(self.heads + *scan);
-            if at != NONE {
-                return Some(self.end_point(at as usize));
+            let mut first = None;
+            self.each_end(*scan, |s| {
+                first = Some(s);
+                false
+            });
+            if let Some(s) = first {
+                return Some(self.end_point(s));
             }
             *scan += 1;
         }
