@@ -1103,8 +1103,7 @@ impl Out {
         if let (Some(kept), Some(last)) = (self.kept, self.last) {
             if self.tol2 > 0.0 && self.n_dropped < MERGE_SPAN {
                 let near = |p: Packed| chord_dist2(kept, q, p) <= self.tol2;
-                let dropped_ok = self.dropped.iter().take(self.n_dropped).all(|&p| near(p));
-                if near(last) && dropped_ok {
+                if near(last) && self.dropped.iter().take(self.n_dropped).all(|&p| near(p)) {
                     dst.pop();
                     if let Some(slot) = self.dropped.get_mut(self.n_dropped) {
                         *slot = last;
