@@ -560,7 +560,8 @@ impl<'s, 'g> Index<'s, 'g> {
             } else {
                 to - 1
             };
-            if self.point(i) == cur && self.kind(i) != Kind::Dot {
+            // Only a fragment's first point may be a dot (the rest are lines).
+            if self.point(i) == cur && (i != from || self.kind(i) != Kind::Dot) {
                 let next = if i == from { (from + 1).min(to - 1) } else { i.saturating_sub(1).max(from) };
                 let score = dir_in.map_or(0.0, |d| {
                     let u = unit(cur, self.point(next));
@@ -1029,9 +1030,11 @@ impl Walk {
             self.out.finish(dst, stats);
             stats.travel += length(first, self.cur) / f32::from(1u16 << x.src.shift());
         }
+        // Only a fragment's first point may be a dot (the rest are lines).
+        let dot = x.kind(from) == Kind::Dot;
         let mut emit = |i: usize| {
             let q = x.point(i);
-            self.out.point(dst, q, x.kind(i) == Kind::Dot, stats);
+            self.out.point(dst, q, dot && i == from, stats);
             if self.cur != q {
                 self.prev = Some(self.cur);
                 self.cur = q;

@@ -176,13 +176,9 @@ impl<'a> Geometry<'a> {
         Some((p, Kind::from_bits(byte >> (2 * (i % 4)))))
     }
 
-    /// Point `i` alone (no kind: the stitcher's hot lookups).
-    #[inline]
-    pub(crate) fn point_at(&self, i: usize) -> Option<Packed> {
-        if i >= self.held.len {
-            return None;
-        }
-        self.points.get(i).map(unpack)
+    /// The held points' bytes, and the kinds' bytes.
+    pub(crate) fn held_parts(&self) -> (&[[u8; 6]], &[u8]) {
+        (self.points.get(..self.held.len).unwrap_or(&[]), self.kinds)
     }
 
     /// The kind of point `i` alone.
@@ -335,62 +331,66 @@ impl<'a> Geometry<'a> {
 }
 
 /// The points of a surface in one or two stores, as one sequence: all of
-/// the first, then all of the second (the part that spilled).
+/// the first, then all of the second (the part that spilled). It keeps
+/// the stores' held points and kinds as slices: a lookup is one compare
+/// and one bounds check (the stitcher's hottest path).
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Source<'g> {
-    head: &'g Geometry<'g>,
-    tail: Option<&'g Geometry<'g>>,
+    points: [&'g [[u8; 6]]; 2],
+    kinds: [&'g [u8]; 2],
+    /// The fixed point shift (the first store's: both have the volume's).
+    shift: u8,
 }
 
 impl<'g> Source<'g> {
     /// One store.
     pub(crate) fn one(g: &'g Geometry<'g>) -> Self {
-        Self { head: g, tail: None }
+        let (points, kinds) = g.held_parts();
+        Self { points: [points, &[]], kinds: [kinds, &[]], shift: g.shift() }
     }
 
     /// `head`'s points, then `tail`'s.
     pub(crate) fn two(head: &'g Geometry<'g>, tail: &'g Geometry<'g>) -> Self {
-        Self { head, tail: Some(tail) }
+        let ((p0, k0), (p1, k1)) = (head.held_parts(), tail.held_parts());
+        Self { points: [p0, p1], kinds: [k0, k1], shift: head.shift() }
     }
 
     /// Points in all.
     pub(crate) fn len(&self) -> usize {
-        self.head.len() + self.tail.map_or(0, Geometry::len)
+        self.points[0].len() + self.points[1].len()
     }
 
-    /// The fixed point shift (the first store's: both have the volume's).
+    /// The fixed point shift.
     pub(crate) fn shift(&self) -> u8 {
-        self.head.shift()
-    }
-
-    /// The store point `i` is in, and its index there.
-    #[inline]
-    fn locate(&self, i: usize) -> Option<(&'g Geometry<'g>, usize)> {
-        match i.checked_sub(self.head.len()) {
-            None => Some((self.head, i)),
-            Some(j) => Some((self.tail?, j)),
-        }
+        self.shift
     }
 
     /// Point `i` and its kind.
     #[inline]
     pub(crate) fn get(&self, i: usize) -> Option<(Packed, Kind)> {
-        let (g, j) = self.locate(i)?;
-        g.get(j)
+        Some((self.point_at(i)?, self.kind(i)?))
     }
 
     /// Point `i` alone.
     #[inline]
     pub(crate) fn point_at(&self, i: usize) -> Option<Packed> {
-        let (g, j) = self.locate(i)?;
-        g.point_at(j)
+        let [head, tail] = self.points;
+        if i < head.len() { head.get(i) } else { tail.get(i - head.len()) }.map(unpack)
     }
 
     /// The kind of point `i` alone.
     #[inline]
     pub(crate) fn kind(&self, i: usize) -> Option<Kind> {
-        let (g, j) = self.locate(i)?;
-        g.kind(j)
+        let [head, tail] = self.points;
+        let (kinds, j) = if i < head.len() {
+            (self.kinds[0], i)
+        } else if i - head.len() < tail.len() {
+            (self.kinds[1], i - head.len())
+        } else {
+            return None;
+        };
+        let byte = *kinds.get(j / 4)?;
+        Some(Kind::from_bits(byte >> (2 * (j % 4))))
     }
 }
 
@@ -488,7 +488,10 @@ mod tests {
             assert!(g.push_raw(p, if i == 0 { Kind::Move } else { Kind::Line }));
         }
         assert!(!g.push_raw([9; 3], Kind::Line));
-        assert_eq!((0..3).map(|i| g.point_at(i).unwrap()).collect::<Vec<_>>(), q);
+        assert_eq!((0..3).map(|i| g.get(i).unwrap().0).collect::<Vec<_>>(), q);
+        let s = Source::one(&g);
+        assert_eq!((0..3).map(|i| s.point_at(i).unwrap()).collect::<Vec<_>>(), q);
+        assert_eq!(s.point_at(3), None);
         assert_eq!(bytes[1..3], [0, 0]);
         assert_eq!(bytes[3..5], [0xFF, 0xFF]);
     }
