@@ -249,19 +249,13 @@ impl<'s, 'g> Index<'s, 'g> {
         let points = src.len();
         let mut frags = 0usize;
         let mut top = [0u16; 3];
-        for i in 0..points {
-            // The stitch pass's buckets need no extent: the kinds alone.
-            let kind = if hashed {
-                src.kind(i)?
-            } else {
-                let (q, kind) = src.get(i)?;
-                for (t, v) in top.iter_mut().zip(q) {
+        src.for_each_kind(|i, kind| frags += usize::from(kind.starts() || i == 0));
+        if !hashed {
+            // The grid's extent (the stitch pass's buckets need none).
+            for i in 0..points {
+                for (t, v) in top.iter_mut().zip(src.point_at(i)?) {
                     *t = (*t).max(v);
                 }
-                kind
-            };
-            if kind.starts() || i == 0 {
-                frags += 1;
             }
         }
         // Words of `u32`, unless the stitch pass's index has less than a
@@ -308,12 +302,12 @@ impl<'s, 'g> Index<'s, 'g> {
             w.set(d, 0);
         }
         let mut k = 0;
-        for i in 0..points {
-            if src.kind(i).is_some_and(Kind::starts) || i == 0 {
+        src.for_each_kind(|i, kind| {
+            if kind.starts() || i == 0 {
                 w.set(k, i as u32);
                 k += 1;
             }
-        }
+        });
         for c in 0..cells {
             w.set(heads + c, NONE);
         }
@@ -962,8 +956,10 @@ impl Tour {
                     let v = x.point(i);
                     // Either jump alone surely as long as the best (as in
                     // `two_opt`): no shorter, without a square root.
-                    let near = dist2f(prev, v).max(next.map_or(0.0, |n| dist2f(v, n)));
-                    if near * 0.999_99 >= best.0 * best.0 {
+                    let bound = best.0 * best.0;
+                    if dist2f(prev, v) * 0.999_99 >= bound
+                        || next.is_some_and(|n| dist2f(v, n) * 0.999_99 >= bound)
+                    {
                         continue;
                     }
                     let c = cost(v);

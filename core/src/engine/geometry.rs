@@ -371,6 +371,26 @@ impl<'g> Source<'g> {
         Some((self.point_at(i)?, self.kind(i)?))
     }
 
+    /// `f(i, kind)` for every point in order: four kinds a byte read,
+    /// not a lookup a point.
+    #[inline]
+    pub(crate) fn for_each_kind(&self, mut f: impl FnMut(usize, Kind)) {
+        let mut i = 0;
+        for (points, kinds) in self.points.iter().zip(self.kinds) {
+            let mut left = points.len();
+            for &byte in kinds {
+                if left == 0 {
+                    break;
+                }
+                for k in 0..left.min(4) {
+                    f(i, Kind::from_bits(byte >> (2 * k)));
+                    i += 1;
+                }
+                left = left.saturating_sub(4);
+            }
+        }
+    }
+
     /// Point `i` alone.
     #[inline]
     pub(crate) fn point_at(&self, i: usize) -> Option<Packed> {
@@ -542,6 +562,26 @@ mod tests {
         // A store that cannot be where it is said to be holds nothing.
         let mut bytes = [0u8; 10];
         assert_eq!(Geometry::move_to_front(&mut bytes, 20, Held { len: 3, ..Held::empty(2) }).len(), 0);
+    }
+
+    #[test]
+    fn every_kind_in_order_over_two_stores_of_any_length() {
+        let cycle = [Kind::Move, Kind::Line, Kind::Dot, Kind::Loop, Kind::Line, Kind::Line, Kind::Move];
+        for n in 0..11 {
+            for m in 0..11 {
+                let (mut a, mut b) = (store(12), store(12));
+                let (mut g, mut h) = (Geometry::new(&mut a), Geometry::new(&mut b));
+                for i in 0..n + m {
+                    let store = if i < n { &mut g } else { &mut h };
+                    assert!(store.push_raw([i as u16; 3], cycle[i % cycle.len()]));
+                }
+                let s = Source::two(&g, &h);
+                let mut got = Vec::new();
+                s.for_each_kind(|i, k| got.push((i, k)));
+                let want: Vec<_> = (0..n + m).map(|i| (i, cycle[i % cycle.len()])).collect();
+                assert_eq!(got, want, "{n} + {m} points");
+            }
+        }
     }
 
     #[test]
