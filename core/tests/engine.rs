@@ -775,6 +775,28 @@ fn a_surface_larger_than_memory_is_cut_and_counted() {
     assert!(e.commands().next().is_some());
 }
 
+#[test]
+fn a_picture_larger_than_the_front_is_cut_and_said_to_be() {
+    // Every piece fits the back; stitched and merged they still do not fit
+    // a front of 200 points.
+    let v = Vol { levels: vec![0.1], ..Vol::demo(Demo::Hydrogen, 16, SampleType::F32) };
+    let mut mem = Mem::sized(2 * 16 * 16 * 4, 16, [200, 8000], 8 * 8000);
+    let mut e = engine(&mut mem);
+    e.feed(&Host::new().volume(&v), 0);
+    let ev = events(&mut e);
+    assert!(ev.iter().any(|x| matches!(x, Event::Committed { dropped: 0, .. })), "{ev:?}");
+    e.update(0);
+    let ev = events(&mut e);
+    let Some(Event::Stitched { points, cut, ordered, .. }) =
+        ev.iter().find(|x| matches!(x, Event::Stitched { .. })).copied()
+    else {
+        panic!("{ev:?}")
+    };
+    assert!(ordered, "{ev:?}");
+    assert!(points <= 200 && cut > 500, "{ev:?}");
+    assert_eq!(e.chain_stats().cut, cut);
+}
+
 /// The hydrogen orbital at 32^3 and the CLI's level: 12,816 points as
 /// contoured, 7,308 once stitched and merged.
 fn hydrogen32() -> Vol {
@@ -810,6 +832,8 @@ fn shows_hydrogen32_whole(buffers: Buffers<'_>) {
     assert!(ev.contains(&committed), "{ev:?}");
     e.update(0);
     let (st, all) = (e.chain_stats(), whole.chain_stats());
+    let stitched = Event::Stitched { fragments: st.fragments, points: st.points_out, cut: 0, ordered: true };
+    assert!(events(&mut e).contains(&stitched), "{st:?}");
     assert_eq!(st.points_in, 12816);
     assert!(st.ordered);
     assert!(st.points_out <= 8192, "{st:?}");

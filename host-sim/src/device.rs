@@ -230,7 +230,10 @@ impl<'a> Board<'a> {
                 let mut shown_volume = false;
                 while let Some(ev) = self.engine.next_event() {
                     let mut line = format!("{} {ev}", self.stamp());
-                    if let (Event::Redrawn { .. }, Some(t)) = (ev, self.committed_at.take()) {
+                    // The redraw of a committed volume (other events, such as
+                    // its stitching, come before it in the same update).
+                    let redraw = matches!(ev, Event::Redrawn { .. });
+                    if let Some(t) = self.committed_at.take_if(|_| redraw) {
                         self.summary.last_latency = t.elapsed().as_secs_f64();
                         line.push_str(&format!(" latency_ms={:.1}", self.summary.last_latency * 1e3));
                         self.summary.volumes += 1;

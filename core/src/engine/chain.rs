@@ -74,6 +74,8 @@ pub struct ChainStats {
     /// False when the scratch was too small: the fragments were copied in
     /// the order they came.
     pub ordered: bool,
+    /// Points the output had no room for: the picture is cut short.
+    pub cut: u32,
 }
 
 /// How [`chain`] picks the next fragment.
@@ -780,6 +782,7 @@ fn chain_on(
     }
     walk.out.finish(dst, &mut stats);
     stats.points_out = dst.len() as u32;
+    stats.cut = dst.dropped();
     stats
 }
 
@@ -792,6 +795,7 @@ fn copy(src: Source<'_>, dst: &mut Geometry<'_>, stats: &mut ChainStats) {
         }
     }
     stats.points_out = dst.len() as u32;
+    stats.cut = dst.dropped();
 }
 
 /// The point where the beam leaves fragment `f` entered at point `end`.

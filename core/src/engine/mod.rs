@@ -276,6 +276,19 @@ pub enum Event {
         /// Subgrids skipped for NaN or infinite samples.
         nonfinite_cells: u32,
     },
+    /// A completed volume's pieces were stitched and ordered into the
+    /// picture.
+    Stitched {
+        /// Contour fragments in (one a subgrid and level).
+        fragments: u32,
+        /// Points of the picture.
+        points: u32,
+        /// Points the picture had no room for (it is cut short).
+        cut: u32,
+        /// False when there was too little scratch to stitch and order:
+        /// the pieces are drawn as they came, with more blanked travel.
+        ordered: bool,
+    },
     /// A transfer ended without a picture; the old one stays.
     Aborted {
         /// Why.
@@ -326,6 +339,9 @@ impl core::fmt::Display for Event {
                 f,
                 "committed dims={x}x{y}x{z} commands={commands} dropped={dropped} nonfinite_cells={nonfinite_cells}"
             ),
+            Self::Stitched { fragments, points, cut, ordered } => {
+                write!(f, "stitched fragments={fragments} points={points} cut={cut} ordered={ordered}")
+            }
             Self::Aborted { reason, slices } => write!(f, "aborted slices={slices} reason={reason}"),
             Self::Nacked { seq, code } => write!(f, "nack seq={seq} code={code:?}"),
             Self::FrameError { error } => write!(f, "bad frame: {error}"),
@@ -623,11 +639,18 @@ impl<'a> Engine<'a> {
             duplicate_segments: stitched.duplicate_segments,
             culled_dots: stitched.culled_dots,
             merged: stitched.merged + ordered.merged,
+            cut: stitched.cut.saturating_add(ordered.cut),
             ..ordered
         };
         if let Some(s) = dev.shown.as_mut() {
             s.points = self.front.len() as u32;
         }
+        dev.event(Event::Stitched {
+            fragments: self.chain.fragments,
+            points: self.chain.points_out,
+            cut: self.chain.cut,
+            ordered: self.chain.ordered,
+        });
         dev.status_due = true;
     }
 
