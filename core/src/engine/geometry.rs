@@ -171,9 +171,7 @@ impl<'a> Geometry<'a> {
         if i >= self.held.len {
             return None;
         }
-        let p = unpack(self.points.get(i)?);
-        let byte = *self.kinds.get(i / 4)?;
-        Some((p, Kind::from_bits(byte >> (2 * (i % 4)))))
+        Some((unpack(self.points.get(i)?), kind_in(self.kinds, i)?))
     }
 
     /// The held points' bytes, and the kinds' bytes.
@@ -187,8 +185,7 @@ impl<'a> Geometry<'a> {
         if i >= self.held.len {
             return None;
         }
-        let byte = *self.kinds.get(i / 4)?;
-        Some(Kind::from_bits(byte >> (2 * (i % 4))))
+        kind_in(self.kinds, i)
     }
 
     fn set_kind(&mut self, i: usize, kind: Kind) {
@@ -409,9 +406,15 @@ impl<'g> Source<'g> {
         } else {
             return None;
         };
-        let byte = *kinds.get(j / 4)?;
-        Some(Kind::from_bits(byte >> (2 * (j % 4))))
+        kind_in(kinds, j)
     }
+}
+
+/// The kind of point `i` in kind bytes (four a byte).
+#[inline]
+fn kind_in(kinds: &[u8], i: usize) -> Option<Kind> {
+    let byte = *kinds.get(i / 4)?;
+    Some(Kind::from_bits(byte >> (2 * (i % 4))))
 }
 
 /// A point as its 6 stored bytes.
