@@ -10,6 +10,12 @@
 //! cells (a few percent in a real volume) build a subgrid and traverse its
 //! contouring trees; those touching a non-finite sample are skipped there
 //! and counted.
+//!
+//! Where the cells lie between two rows of samples ([`Sweep::run_rows`]:
+//! the engine's streaming rows, [`crate::contour::contour_rows`]), each
+//! sample is classed once instead (finite and above every level, finite
+//! and below every level) into bits, 32 cells a word, and the marked cells
+//! are the words' zero bits.
 
 use crate::command::CommandSink;
 use crate::contour::{ContourStats, contour_subgrid};
