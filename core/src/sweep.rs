@@ -124,7 +124,8 @@ const WORDS: usize = BLOCK / 32 + 1;
 /// both rows).
 // Not inlined: inside the engine's row contouring its dozen live values
 // spilled to the stack, and the Cortex-M4 counted 3.9M instructions for
-// hydrogen 32^3's classes, against 1.3M as a function of its own.
+// hydrogen 32^3's classes, against 1.3M as a function of its own (one
+// profile run each; later runs of this code counted 1.3M to 2.1M).
 #[inline(never)]
 fn all_four(lower: &[f32], upper: &[f32], above: Between, below: Between) -> [[u32; WORDS]; 2] {
     // First the columns (both samples in), one word of 32 at a time, shifted
