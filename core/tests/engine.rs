@@ -409,6 +409,88 @@ fn a_slowed_sample_clock_is_reported_in_the_refresh_rate() {
     assert_eq!(status(&mut e), Some(((500_000.0 / samples as f32) * 100.0) as u16));
 }
 
+/// A frame of the picture played to its end, as the firmware plays it (in
+/// halves of 512 samples).
+fn play(e: &Engine<'_>) -> isoscope_core::beam::FrameStats {
+    let mut frame = e.frame();
+    while frame.fill_with(512, |_| {}) == 512 {}
+    frame.stats()
+}
+
+#[test]
+fn a_board_that_counts_while_playing_reports_the_same_a_frame_later() {
+    let v = Vol::demo(Demo::Torus, 10, SampleType::U8);
+    // The engine that counts in `update`: its events and answers.
+    let mut mem = big();
+    let mut e = engine(&mut mem);
+    e.feed(&Host::new().volume(&v), 0);
+    let before = (events(&mut e), answers(&mut e));
+    assert!(e.update(1));
+    let (want_events, want_answers) = (events(&mut e), answers(&mut e));
+    assert!(matches!(want_events.last(), Some(Event::Redrawn { .. })), "{want_events:?}");
+    assert!(matches!(want_answers.last(), Some(Message::Status { state: DeviceState::Showing, .. })));
+    // The board's: nothing counted, no status, until a frame is played.
+    let mut mem = big();
+    let mut e = engine(&mut mem);
+    e.count_while_playing(true);
+    let mut host = Host::new();
+    e.feed(&host.volume(&v), 0);
+    assert_eq!((events(&mut e), answers(&mut e)), before);
+    assert!(e.update(1));
+    let (mut got_events, mut got_answers) = (events(&mut e), answers(&mut e));
+    assert!(!got_events.iter().any(|ev| matches!(ev, Event::Redrawn { .. })), "{got_events:?}");
+    assert!(!got_answers.iter().any(|m| matches!(m, Message::Status { .. })), "{got_answers:?}");
+    let stats = play(&e);
+    assert_eq!(stats, isoscope_core::beam::frame_stats(e.commands(), e.beam()));
+    e.played(stats);
+    got_events.extend(events(&mut e));
+    got_answers.extend(answers(&mut e));
+    assert_eq!(got_events, want_events);
+    assert_eq!(got_answers, want_answers);
+    // Further frames count nothing.
+    e.played(stats);
+    assert!(events(&mut e).is_empty());
+    // A new view is counted from its own first frame.
+    let seq = host.next();
+    e.feed(
+        &frame(&Message::SetView {
+            seq,
+            yaw: 75.0,
+            pitch: 20.0,
+            roll: 0.0,
+            fov_deg: 0.0,
+            spin_deg_per_s: 0.0,
+        }),
+        2,
+    );
+    assert!(e.update(2));
+    assert!(!events(&mut e).iter().any(|ev| matches!(ev, Event::Redrawn { .. })));
+    let turned = play(&e);
+    assert_ne!(turned, stats);
+    e.played(turned);
+    let Some(Event::Redrawn { refresh_centi_hz, .. }) = events(&mut e).pop() else {
+        panic!("no redraw counted")
+    };
+    assert_eq!(refresh_centi_hz, ((1_000_000.0 / turned.samples as f32) * 100.0) as u16);
+    // Counting in `update` again: a count still due is made at once.
+    let seq = host.next();
+    e.feed(
+        &frame(&Message::SetView {
+            seq,
+            yaw: 30.0,
+            pitch: 20.0,
+            roll: 0.0,
+            fov_deg: 0.0,
+            spin_deg_per_s: 0.0,
+        }),
+        3,
+    );
+    assert!(e.update(3));
+    let _ = events(&mut e);
+    e.count_while_playing(false);
+    assert!(matches!(events(&mut e).pop(), Some(Event::Redrawn { .. })));
+}
+
 /// Commit `a`, then run `bad` (frames), then check the picture is `a`'s.
 fn picture_survives(bad: impl FnOnce(&mut Engine<'_>, &mut Host, &Vol)) -> Vec<Event> {
     let a = Vol::demo(Demo::Torus, 12, SampleType::U8);

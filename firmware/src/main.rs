@@ -83,6 +83,9 @@ fn main() -> ! {
     };
     board.out.set_park(engine.beam().park_sample());
     board.out.park();
+    // A new picture's frame is counted as it plays, not in `update` with
+    // the beam parked (see `run`).
+    engine.count_while_playing(true);
     boot(engine);
     board.watchdog.feed();
     run(board, engine)
@@ -345,7 +348,8 @@ fn run(board: board::Board, engine: &mut Engine<'static>) -> ! {
             }
             watchdog.feed();
         }
-        if frame.stats().samples == 0 {
+        let played = frame.stats();
+        if played.samples == 0 {
             // Nothing to draw: the beam rests parked for a half buffer.
             if out.pad().is_err() {
                 board::fault();
@@ -353,6 +357,9 @@ fn run(board: board::Board, engine: &mut Engine<'static>) -> ! {
             serve(&mut link, &mut rx, &mut inbox, &mut tx, &mut timing);
             watchdog.feed();
         }
+        // The first frame of a new picture counts it: its refresh rate, the
+        // redraw event and the status after a volume.
+        engine.played(played);
     }
 }
 
