@@ -690,7 +690,7 @@ impl<'a> Engine<'a> {
     /// Leave the frame count of a new picture to the board (`on`): then
     /// [`Engine::update`] does not run the beam scheduler over the whole
     /// picture once more before it is shown (for hydrogen 32^3 on the
-    /// Cortex-M4 about 3.4M instructions, 20 ms with the beam parked), and
+    /// Cortex-M4 about 3.3M instructions, 20 ms with the beam parked), and
     /// the board hands over the first frame it plays of it with
     /// [`Engine::played`]. The `Redrawn` event and the status that follows a
     /// new volume then come a frame later; the refresh rate reported meanwhile
