@@ -95,7 +95,7 @@ fn key(v: f32) -> i32 {
 }
 
 /// Keys strictly between `lo` and `hi` (`lo < hi`): one subtraction and
-/// one unsigned compare.
+/// one unsigned compare, as a borrow.
 #[derive(Debug, Clone, Copy)]
 struct Between {
     /// `lo + 1`.
@@ -109,9 +109,15 @@ impl Between {
         Self { from: lo.wrapping_add(1), span: (hi.wrapping_sub(lo) as u32).wrapping_sub(1) }
     }
 
+    /// All ones when `k` is in, else 0: the borrow of `k - from` less
+    /// `span`, as a 64-bit subtraction's high word (a subtraction and a
+    /// subtraction with carry on the M4, where a compare made a flag into
+    /// a value with a conditional move: 38 instructions a column of two
+    /// samples became 32).
     #[inline(always)]
-    fn has(self, k: i32) -> u32 {
-        u32::from((k.wrapping_sub(self.from) as u32) < self.span)
+    fn mask(self, k: i32) -> u32 {
+        let x = u64::from(k.wrapping_sub(self.from) as u32);
+        (x.wrapping_sub(u64::from(self.span)) >> 32) as u32
     }
 }
 
@@ -138,8 +144,8 @@ fn all_four(lower: &[f32], upper: &[f32], above: Between, below: Between) -> [[u
         let (mut a, mut b) = (0u32, 0u32);
         for (&l, &u) in l.iter().zip(u).rev() {
             let (kl, ku) = (key(l), key(u));
-            a = (a << 1) | (above.has(kl) & above.has(ku));
-            b = (b << 1) | (below.has(kl) & below.has(ku));
+            a = (a << 1) | ((above.mask(kl) & above.mask(ku)) >> 31);
+            b = (b << 1) | ((below.mask(kl) & below.mask(ku)) >> 31);
         }
         (*a_w, *b_w) = (a, b);
     }
@@ -306,6 +312,32 @@ mod tests {
 
     /// A cell's index and a point.
     type Placed = (usize, f32, f32);
+
+    #[test]
+    fn between_mask_is_the_unsigned_compare() {
+        let edges = [i32::MIN, i32::MIN + 1, -2, -1, 0, 1, 2, 0x7F80_0000, i32::MAX - 1, i32::MAX];
+        for &lo in &edges {
+            for &hi in &edges {
+                if lo >= hi {
+                    continue;
+                }
+                let b = Between::new(lo, hi);
+                for &k in &edges {
+                    let want = lo < k && k < hi;
+                    assert_eq!(b.mask(k), if want { u32::MAX } else { 0 }, "lo, hi, k = {:?}", (lo, hi, k));
+                }
+            }
+        }
+    }
+
+    proptest! {
+        #[test]
+        fn between_mask_is_the_unsigned_compare_anywhere(lo in any::<i32>(), hi in any::<i32>(), k in any::<i32>()) {
+            prop_assume!(lo < hi);
+            let b = Between::new(lo, hi);
+            prop_assert_eq!(b.mask(k), if lo < k && k < hi { u32::MAX } else { 0 });
+        }
+    }
 
     /// Records every command with its level.
     struct Record(Vec<(usize, Command<Placed>)>);
