@@ -315,9 +315,30 @@ impl<'s, 'g> Index<'s, 'g> {
         }
         let mut index =
             Self { src, w, n, bits, heads, links, dead, frags, any_vertex, buckets, odd: Some(0) };
-        for f in 0..frags {
-            index.each_slot(f, |x, s| x.link(s));
-            index.odd = index.odd.map(|h| h ^ index.ends_hash(f));
+        if any_vertex {
+            for f in 0..frags {
+                index.each_slot(f, |x, s| x.link(s));
+            }
+        } else {
+            // The stitch pass: a fragment's span, end points and kind read
+            // once for its two links and its share of `odd` (what
+            // `each_slot`, `link` and `ends_hash` each read again).
+            let mut odd = 0u64;
+            for f in 0..frags {
+                let (from, to) = index.span(f);
+                let a = index.point(from);
+                index.link_to(2 * f, a);
+                let mut h = point_hash(a);
+                if to - from > 1 {
+                    let b = index.point(to - 1);
+                    index.link_to(2 * f + 1, b);
+                    h ^= point_hash(b);
+                }
+                if index.kind(from) != Kind::Dot {
+                    odd ^= h;
+                }
+            }
+            index.odd = Some(odd);
         }
         Some(index)
     }
@@ -434,7 +455,13 @@ impl<'s, 'g> Index<'s, 'g> {
     }
 
     fn link(&mut self, s: usize) {
-        let c = self.cell(self.point(self.end_point(s)));
+        self.link_to(s, self.point(self.end_point(s)));
+    }
+
+    /// Put slot `s`, whose point is `q`, at the head of `q`'s list.
+    #[inline]
+    fn link_to(&mut self, s: usize, q: Packed) {
+        let c = self.cell(q);
         let head = self.w.get(self.heads + c);
         self.w.set(self.links + s, head);
         self.w.set(self.heads + c, s as u32);
