@@ -570,7 +570,11 @@ impl<'s, 'g> Index<'s, 'g> {
             let n = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
             if n > 0.0 { [d[0] / n, d[1] / n, d[2] / n] } else { [0.0; 3] }
         };
-        let dir_in = prev.map(|p| unit(p, cur));
+        // Scores are made only once a second end turns up (the first is
+        // scored then): a lone end, as at a crossing's second visit, is
+        // taken without a square root.
+        let mut dir_in: Option<Option<[f32; 3]>> = None;
+        let mut first: Option<(usize, usize, usize)> = None;
         let mut best: Option<(f32, (usize, usize))> = None;
         self.each_end(self.cell(cur), |s| {
             let f = self.end_frag(s);
@@ -586,17 +590,28 @@ impl<'s, 'g> Index<'s, 'g> {
             // Only a fragment's first point may be a dot (the rest are lines).
             if self.point(i) == cur && (i != from || self.kind(i) != Kind::Dot) {
                 let next = if i == from { (from + 1).min(to - 1) } else { i.saturating_sub(1).max(from) };
-                let score = dir_in.map_or(0.0, |d| {
-                    let u = unit(cur, self.point(next));
-                    d[0] * u[0] + d[1] * u[1] + d[2] * u[2]
-                });
+                if first.is_none() && best.is_none() {
+                    first = Some((i, f, next));
+                    return true;
+                }
+                let d = *dir_in.get_or_insert_with(|| prev.map(|p| unit(p, cur)));
+                let score = |next: usize| {
+                    d.map_or(0.0, |d| {
+                        let u = unit(cur, self.point(next));
+                        d[0] * u[0] + d[1] * u[1] + d[2] * u[2]
+                    })
+                };
+                if let Some((i0, f0, next0)) = first.take() {
+                    best = Some((score(next0), (i0, f0)));
+                }
+                let score = score(next);
                 if best.is_none_or(|(b, _)| score > b) {
                     best = Some((score, (i, f)));
                 }
             }
             true
         });
-        best.map(|(_, end)| end)
+        best.map(|(_, end)| end).or(first.map(|(i, f, _)| (i, f)))
     }
 
     /// The end nearest `cur` within [`RINGS`] rings of cells.
@@ -1620,6 +1635,51 @@ mod tests {
         assert_eq!(cmds.len(), 5);
         assert_eq!(cmds[0], Command::MoveTo(Point3::new(0.0, 0.0, 0.0)));
         assert_eq!(cmds[4], Command::LineTo(Point3::new(0.0, 0.0, 0.0)));
+    }
+
+    #[test]
+    fn a_crossing_is_stitched_straight_through_in_any_order() {
+        // Four arms from (2, 2, 0); every order and every direction of the
+        // pieces must come out as the two straight lines through it.
+        let arms = [[0.0, 2.0, 0.0], [4.0, 2.0, 0.0], [2.0, 0.0, 0.0], [2.0, 4.0, 0.0]];
+        let c = [2.0, 2.0, 0.0];
+        let mut orders: Vec<Vec<usize>> = vec![vec![]];
+        for _ in 0..4 {
+            let mut next = Vec::new();
+            for o in &orders {
+                for a in (0..4).filter(|a| !o.contains(a)) {
+                    next.push([o.clone(), vec![a]].concat());
+                }
+            }
+            orders = next;
+        }
+        assert_eq!(orders.len(), 24);
+        for order in &orders {
+            for flips in 0..16 {
+                let mut p = store(16);
+                let mut src = Geometry::new(&mut p);
+                src.reset(8);
+                for (k, &a) in order.iter().enumerate() {
+                    if flips >> k & 1 == 0 { seg(&mut src, arms[a], c) } else { seg(&mut src, c, arms[a]) }
+                }
+                let mut p2 = store(16);
+                let mut dst = Geometry::new(&mut p2);
+                let mut scratch = [0u8; 512];
+                let st = chain(Source::one(&src), &mut dst, &mut scratch, [0; 3], 0.0, Pass::Stitch);
+                assert_eq!((st.polylines, st.points_out), (2, 6), "{order:?} {flips}");
+                let cmds: Vec<_> = dst.commands().collect();
+                for line in cmds.chunks(3) {
+                    let [Command::MoveTo(a), Command::LineTo(m), Command::LineTo(b)] = line else {
+                        panic!("{order:?} {flips}: {cmds:?}")
+                    };
+                    assert_eq!(*m, Point3::new(2.0, 2.0, 0.0), "{order:?} {flips}");
+                    assert!(
+                        a.x + b.x == 4.0 && a.y + b.y == 4.0,
+                        "bent at the crossing: {order:?} {flips}: {cmds:?}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]
