@@ -451,18 +451,11 @@ fn a_board_that_counts_while_playing_reports_the_same_a_frame_later() {
     e.played(stats);
     assert!(events(&mut e).is_empty());
     // A new view is counted from its own first frame.
-    let seq = host.next();
-    e.feed(
-        &frame(&Message::SetView {
-            seq,
-            yaw: 75.0,
-            pitch: 20.0,
-            roll: 0.0,
-            fov_deg: 0.0,
-            spin_deg_per_s: 0.0,
-        }),
-        2,
-    );
+    let view = |host: &mut Host, yaw: f32| {
+        let seq = host.next();
+        frame(&Message::SetView { seq, yaw, pitch: 20.0, roll: 0.0, fov_deg: 0.0, spin_deg_per_s: 0.0 })
+    };
+    e.feed(&view(&mut host, 75.0), 2);
     assert!(e.update(2));
     assert!(!events(&mut e).iter().any(|ev| matches!(ev, Event::Redrawn { .. })));
     let turned = play(&e);
@@ -473,18 +466,7 @@ fn a_board_that_counts_while_playing_reports_the_same_a_frame_later() {
     };
     assert_eq!(refresh_centi_hz, ((1_000_000.0 / turned.samples as f32) * 100.0) as u16);
     // Counting in `update` again: a count still due is made at once.
-    let seq = host.next();
-    e.feed(
-        &frame(&Message::SetView {
-            seq,
-            yaw: 30.0,
-            pitch: 20.0,
-            roll: 0.0,
-            fov_deg: 0.0,
-            spin_deg_per_s: 0.0,
-        }),
-        3,
-    );
+    e.feed(&view(&mut host, 30.0), 3);
     assert!(e.update(3));
     let _ = events(&mut e);
     e.count_while_playing(false);
