@@ -19,14 +19,16 @@
 //!   torus).
 //! - [`view`]: 3D view, projection and auto-fit to the DAC range.
 //! - [`screen`]: points in DAC units.
-//! - [`display`]: the display list: cull, stitch, merge, order.
 //! - [`beam`]: the beam scheduler (display list to DAC samples) and frame
 //!   statistics.
 //! - [`pace`]: slowing the sample clock to what the refill keeps up with.
 //! - [`dac`]: the `Dac` trait; [`mock_dac`]: a heap-free mock with ASCII
 //!   art; `spi_dac` (feature `embedded-hal`): the MCP4922.
-//! - [`engine`]: the device engine behind the UART: streaming volumes slice
-//!   by slice, a double-buffered picture, view changes without the volume.
+//! - [`engine`]: the device engine behind the UART, and the one picture
+//!   pipeline of every board and host command: streaming volumes slice by
+//!   slice, cull, stitch, merge and order in 3D in bounded memory, a
+//!   double-buffered picture, view changes without the volume; [`engine::Board`]
+//!   names a board's capacities.
 //! - [`wire`]: the UART frame protocol shared by host and device (postcard,
 //!   CRC-32, COBS; see `docs/wire-format.md`).
 //!
@@ -78,7 +80,6 @@ pub mod command;
 pub mod contour;
 pub mod dac;
 pub mod demo;
-pub mod display;
 pub mod engine;
 mod fastmath;
 pub mod grid;

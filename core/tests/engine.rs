@@ -4,7 +4,6 @@
 
 use isoscope_core::command::{Command, Point3};
 use isoscope_core::demo::Demo;
-use isoscope_core::display::OptimizeConfig;
 use isoscope_core::engine::{
     AbortReason, Buffers, Engine, EngineConfig, Event, Geometry, Packed, StaticBuffers,
 };
@@ -289,7 +288,7 @@ fn batch(v: &Vol) -> Vec<Seg> {
 
 /// An engine that merges nothing, so that its segments are the contour's.
 fn engine(mem: &mut Mem) -> Engine<'_> {
-    let cfg = EngineConfig { optimize: OptimizeConfig { tolerance: 0.0 }, ..EngineConfig::default() };
+    let cfg = EngineConfig { merge_tolerance: 0.0, ..EngineConfig::default() };
     Engine::new(cfg, mem.buffers()).unwrap()
 }
 
@@ -1092,11 +1091,7 @@ fn frames_play_on_while_the_next_volume_streams_in() {
 /// An engine that defers contouring ([`EngineConfig::defer_contouring`]),
 /// as the firmware runs it.
 fn deferring(mem: &mut Mem) -> Engine<'_> {
-    let cfg = EngineConfig {
-        optimize: OptimizeConfig { tolerance: 0.0 },
-        defer_contouring: true,
-        ..EngineConfig::default()
-    };
+    let cfg = EngineConfig { merge_tolerance: 0.0, defer_contouring: true, ..EngineConfig::default() };
     Engine::new(cfg, mem.buffers()).unwrap()
 }
 

@@ -1,22 +1,22 @@
 //! The surface turning on the simulated screen, as a looping GIF or APNG:
 //! a chicken-wire surface reads as 3D only when it moves.
 //!
-//! The volume is contoured once ([`contour_surface`]); each animation frame
-//! re-projects the same 3D commands at the next yaw ([`Surface::scene`],
-//! which also culls, stitches and orders them as for a still frame, and
-//! fits the view's bounding sphere so the picture keeps its scale while it
-//! turns), schedules the beam as a refresh loop, and draws it on one
-//! [`Phosphor`] that keeps [`PhosphorConfig::persistence`] of the frames
-//! before, so a moving line leaves the faint trail it leaves on a tube.
+//! The volume goes to an in-process board once ([`crate::scene::with_board`]:
+//! contoured, stitched and ordered by the board's engine); each animation
+//! frame sets the board's view to the next yaw, as `send --yaw` would (the
+//! board re-projects its picture; every view fits the surface's bounding
+//! sphere, so the picture keeps its scale while it turns), and draws the
+//! board's frame on one [`Phosphor`] that keeps
+//! [`PhosphorConfig::persistence`] of the frames before, so a moving line
+//! leaves the faint trail it leaves on a tube.
 //!
 //! # Timing
 //!
 //! Animation frame `k` (of [`AnimConfig::frames`]) shows the view at `yaw +
 //! k * turn_deg / frames`, so with a whole turn (the default) the last frame
 //! leads back into the first and the file loops seamlessly. Each animation
-//! frame draws [`AnimConfig::refreshes`] refresh-loop frames of its view
-//! (the phosphor decaying before each one), and the beam runs on from where
-//! the previous refresh left it, as in the firmware's loop. Before frame 0,
+//! frame draws [`AnimConfig::refreshes`] of the board's frames of its view
+//! (the phosphor decaying before each one). Before frame 0,
 //! the views leading up to it are drawn (not written) until the picture
 //! they leave has decayed below 1/1000, so frame 0 has its trail too.
 //!
@@ -34,14 +34,12 @@
 //! Both loop forever by default ([`AnimConfig::plays`]) with a delay of
 //! [`AnimConfig::delay_cs`] hundredths of a second a frame.
 
+use crate::board::InProcess;
+use crate::link::WireVolume;
 use crate::phosphor::{Phosphor, PhosphorConfig};
 use crate::progress::Progress;
-use crate::scene::{Scene, SceneConfig, Surface, ViewFit, contour_surface};
+use crate::scene::{SceneConfig, with_board};
 use anyhow::{Context, Result, anyhow, bail};
-use isoscope_core::beam::{BeamConfig, Park, Scheduler};
-use isoscope_core::grid::Volume;
-use isoscope_core::sample::Sample;
-use isoscope_core::screen::ScreenPoint;
 use std::collections::HashMap;
 use std::io::Write;
 use std::path::Path;
@@ -154,13 +152,14 @@ pub struct AnimStats {
     pub seconds: [f64; 3],
 }
 
-/// Animate `volume` turning: contour it once with `scene`'s planes, levels
-/// and stride, then [`animate_surface`].
+/// Animate `volume` turning: put it on an in-process board once with
+/// `scene`'s settings and memory, then draw the board's frame at each yaw.
 ///
 /// # Errors
-/// As [`contour_surface`] and [`animate_surface`].
-pub fn animate<T: Sample, W: Write>(
-    volume: &Volume<'_, T>,
+/// An invalid animation, picture, view or beam configuration, a volume
+/// the board refuses, or the writer's error.
+pub fn animate<W: Write>(
+    volume: &WireVolume,
     scene: &SceneConfig,
     picture: PhosphorConfig,
     anim: &AnimConfig,
@@ -168,58 +167,37 @@ pub fn animate<T: Sample, W: Write>(
     progress: Option<&Progress>,
 ) -> Result<AnimStats> {
     anim.validate()?;
-    let t0 = Instant::now();
-    let surface = contour_surface(volume, scene)?;
-    let contouring = t0.elapsed().as_secs_f64();
-    let mut stats = animate_surface(&surface, scene, picture, anim, out, progress)?;
-    stats.seconds[0] += contouring;
-    Ok(stats)
-}
-
-/// Animate a contoured surface turning: frame `k` is [`Surface::scene`] of
-/// `scene` with its view yawed by `k * anim.step_deg()` and the
-/// [`ViewFit::Sphere`] fit (whatever `scene.fit` says: a turning view must
-/// not change scale). `picture.bits` must be the beam's.
-///
-/// # Errors
-/// An invalid animation, picture, view or beam configuration, or the
-/// writer's error.
-pub fn animate_surface<W: Write>(
-    surface: &Surface,
-    scene: &SceneConfig,
-    picture: PhosphorConfig,
-    anim: &AnimConfig,
-    out: W,
-    progress: Option<&Progress>,
-) -> Result<AnimStats> {
-    let cfg = SceneConfig { fit: ViewFit::Sphere, ..scene.clone() };
-    let scene_at = |delta_deg: f32| {
-        let cfg = SceneConfig { view: cfg.view.yawed(delta_deg), ..cfg.clone() };
-        surface.scene(&cfg)
-    };
-    animate_scenes(scene_at, &scene.beam, picture, anim, out, progress)
-}
-
-/// The general form: `scene_at(delta_deg)` builds the scene at the base
-/// view turned by `delta_deg` (negative for the frames drawn before frame
-/// 0), drawn with `beam` (whose `bits` must equal `picture.bits`).
-///
-/// # Errors
-/// An invalid animation or picture configuration, `scene_at`'s errors, or
-/// the writer's.
-pub fn animate_scenes<W: Write>(
-    mut scene_at: impl FnMut(f32) -> Result<Scene>,
-    beam: &BeamConfig,
-    picture: PhosphorConfig,
-    anim: &AnimConfig,
-    out: W,
-    progress: Option<&Progress>,
-) -> Result<AnimStats> {
-    anim.validate()?;
-    beam.validate().context("invalid beam settings")?;
-    if picture.bits != beam.bits {
-        bail!("the picture's DAC resolution ({} bits) is not the beam's ({} bits)", picture.bits, beam.bits);
+    if picture.bits != scene.beam.bits {
+        bail!(
+            "the picture's DAC resolution ({} bits) is not the beam's ({} bits)",
+            picture.bits,
+            scene.beam.bits
+        );
     }
+    let t0 = Instant::now();
+    with_board(volume, scene, None, |board, _| {
+        let loading = t0.elapsed().as_secs_f64();
+        let mut stats = animate_board(board, scene, picture, anim, out, progress)?;
+        stats.seconds[0] += loading;
+        Ok(stats)
+    })
+}
+
+/// Animate the picture on `board` turning: frame `k` sets the board's view
+/// to `scene.view` yawed by `k * anim.step_deg()`.
+///
+/// # Errors
+/// An invalid animation or picture configuration, a view the board
+/// refuses, or the writer's error.
+pub fn animate_board<W: Write>(
+    board: &mut InProcess<'_>,
+    scene: &SceneConfig,
+    picture: PhosphorConfig,
+    anim: &AnimConfig,
+    out: W,
+    progress: Option<&Progress>,
+) -> Result<AnimStats> {
+    anim.validate()?;
     let (width, height) = (picture.width, picture.height);
     let persistence = picture.persistence;
     let mut screen = Phosphor::new(picture).context("invalid picture settings")?;
@@ -227,21 +205,23 @@ pub fn animate_scenes<W: Write>(
     let mut encoder = Encoder::new(&mut out, screen.config(), anim)?;
     let step = anim.step_deg();
     let preroll = preroll_frames(persistence, anim);
-    let mut drawer =
-        Drawer { beam: BeamConfig { park: Park { return_at_end: false, ..beam.park }, ..*beam }, at: None };
     let mut seconds = [0.0; 3];
     let mut samples = 0u64;
+    let mut frame = Vec::new();
     for k in -i64::from(preroll)..i64::from(anim.frames) {
         let t0 = Instant::now();
         // In f64, then wrapped: `k * step` of a long animation keeps its
         // precision.
         let delta = ((k as f64 * f64::from(step)) % 360.0) as f32;
-        let scene = scene_at(delta).with_context(|| format!("building frame {k}"))?;
+        board.set_view(&scene.view.yawed(delta)).with_context(|| format!("building frame {k}"))?;
+        frame.clear();
+        frame.extend(board.engine().frame());
         let t1 = Instant::now();
         for _ in 0..anim.refreshes {
-            let n = drawer.refresh(&mut screen, &scene);
+            screen.decay();
+            screen.deposit(frame.iter().copied());
             if k >= 0 {
-                samples += n;
+                samples += frame.len() as u64;
             }
         }
         let t2 = Instant::now();
@@ -285,26 +265,6 @@ fn preroll_frames(persistence: f32, anim: &AnimConfig) -> u32 {
     let refreshes = if p >= 1.0 { f64::INFINITY } else { (1e-3f64.ln() / p.ln()).ceil() };
     let frames = (refreshes / f64::from(anim.refreshes)).ceil();
     if frames >= f64::from(anim.frames) { anim.frames } else { frames as u32 }
-}
-
-/// The beam across refreshes: where it was left.
-struct Drawer {
-    /// The beam, not returning to the park position.
-    beam: BeamConfig,
-    /// Where the last refresh left the beam (none yet: the park position).
-    at: Option<ScreenPoint>,
-}
-
-impl Drawer {
-    /// One refresh of `scene` on `screen`; the samples it took.
-    fn refresh(&mut self, screen: &mut Phosphor, scene: &Scene) -> u64 {
-        screen.decay();
-        let start = self.at.unwrap_or(ScreenPoint::new(f32::NAN, f32::NAN));
-        let mut s = Scheduler::with_start(scene.list.commands(), &self.beam, start);
-        screen.deposit(&mut s);
-        self.at = Some(s.position());
-        s.stats().samples
-    }
 }
 
 /// Counts the bytes written through it.
@@ -416,14 +376,15 @@ fn nearest(palette: &[[u8; 3]], c: [u8; 3]) -> u8 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::volume::{Dims, Samples};
     use isoscope_core::demo::Demo;
     use isoscope_core::view::View;
     use std::io::Cursor;
 
-    fn hydrogen(n: usize) -> Vec<f32> {
+    fn hydrogen(n: usize) -> WireVolume {
         let mut data = vec![0f32; n * n * n];
         Demo::Hydrogen.fill(n, &mut data).unwrap();
-        data
+        WireVolume::new(Dims(n, n, n), &Samples::F32(data), [1.0; 3]).unwrap()
     }
 
     fn scene_cfg() -> SceneConfig {
@@ -435,8 +396,7 @@ mod tests {
     }
 
     fn run(anim: &AnimConfig, size: u32) -> (Vec<u8>, AnimStats) {
-        let data = hydrogen(12);
-        let volume = Volume::new(&data, 12, 12, 12).unwrap();
+        let volume = hydrogen(12);
         let mut out = Vec::new();
         let stats =
             animate(&volume, &scene_cfg(), PhosphorConfig::with_size(size, size), anim, &mut out, None)
@@ -573,8 +533,7 @@ mod tests {
         // beyond the trail. And a 4-frame full turn's frame 0 is a 4-frame
         // full turn's frame 4 (drawn after frame 3): the pre-roll is the
         // animation's own end.
-        let data = hydrogen(12);
-        let volume = Volume::new(&data, 12, 12, 12).unwrap();
+        let volume = hydrogen(12);
         let picture = PhosphorConfig::with_size(48, 48);
         let anim = small(AnimFormat::Apng);
         let mut one = Vec::new();
@@ -592,54 +551,28 @@ mod tests {
     #[test]
     fn the_view_keeps_its_scale_while_turning() {
         // Seen level (pitch 0), a turn about the vertical axis leaves every
-        // point's height alone: with the sphere fit the picture's height is
-        // the same at every yaw, while the box fit breathes. Every frame
-        // stays inside the margin.
-        let data = hydrogen(12);
-        let volume = Volume::new(&data, 12, 12, 12).unwrap();
-        let surface = contour_surface(&volume, &scene_cfg()).unwrap();
-        let height = |fit: ViewFit| {
-            let heights: Vec<f32> = [0.0f32, 20.0, 45.0, 70.0]
-                .iter()
-                .map(|&yaw| {
-                    let view = View { yaw, pitch: 0.0, ..View::DEFAULT };
-                    let s = surface.scene(&SceneConfig { fit, view, ..scene_cfg() }).unwrap();
-                    let ys: Vec<f32> = s.list.commands().map(|c| c.point().y).collect();
-                    let (lo, hi) = ys.iter().fold((f32::MAX, f32::MIN), |(l, h), &y| (l.min(y), h.max(y)));
-                    assert!(lo >= 0.05 * 4095.0 - 1.0 && hi <= 0.95 * 4095.0 + 1.0);
-                    hi - lo
-                })
-                .collect();
-            let (lo, hi) = heights.iter().fold((f32::MAX, f32::MIN), |(l, h), &e| (l.min(e), h.max(e)));
-            (hi - lo) / hi
-        };
-        let sphere = height(ViewFit::Sphere);
-        assert!(sphere < 1e-3, "{sphere}");
-        let boxed = height(ViewFit::Box);
-        assert!(boxed > 0.1, "{boxed}");
-    }
-
-    #[test]
-    fn a_surface_projects_as_build_does() {
-        let data = hydrogen(12);
-        let volume = Volume::new(&data, 12, 12, 12).unwrap();
-        let surface = contour_surface(&volume, &scene_cfg()).unwrap();
-        for fit in [ViewFit::Box, ViewFit::Sphere] {
-            let cfg = SceneConfig { fit, ..scene_cfg() };
-            let a = crate::scene::build(&volume, &cfg).unwrap();
-            let b = surface.scene(&cfg).unwrap();
-            assert_eq!(a.list, b.list);
-            assert_eq!(
-                (a.fragments, a.frame, a.optimize, a.ordering),
-                (b.fragments, b.frame, b.optimize, b.ordering)
-            );
-        }
+        // point's height alone: with the board's fit (the surface's
+        // bounding sphere) the picture's height is the same at every yaw.
+        // Every frame stays inside the margin.
+        let volume = hydrogen(12);
+        let heights: Vec<f32> = [0.0f32, 20.0, 45.0, 70.0]
+            .iter()
+            .map(|&yaw| {
+                let view = View { yaw, pitch: 0.0, ..View::DEFAULT };
+                let s = crate::scene::build(&volume, &SceneConfig { view, ..scene_cfg() }).unwrap();
+                let ys: Vec<f32> = s.commands.iter().map(|c| c.point().y).collect();
+                let (lo, hi) = ys.iter().fold((f32::MAX, f32::MIN), |(l, h), &y| (l.min(y), h.max(y)));
+                assert!(lo >= 0.05 * 4095.0 - 1.0 && hi <= 0.95 * 4095.0 + 1.0);
+                hi - lo
+            })
+            .collect();
+        let (lo, hi) = heights.iter().fold((f32::MAX, f32::MIN), |(l, h), &e| (l.min(e), h.max(e)));
+        assert!((hi - lo) / hi < 1e-3, "{heights:?}");
     }
 
     #[test]
     fn bad_arguments_are_refused() {
-        let data = hydrogen(8);
-        let volume = Volume::new(&data, 8, 8, 8).unwrap();
+        let volume = hydrogen(8);
         let picture = PhosphorConfig::with_size(16, 16);
         let err = |scene: &SceneConfig, picture: PhosphorConfig, anim: AnimConfig| {
             let mut out = Vec::new();

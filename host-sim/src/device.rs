@@ -2,42 +2,16 @@
 //! a TCP port, fed at the line rate of a real UART, drawing through the
 //! beam scheduler onto the simulated phosphor.
 
+use crate::board::HostBuffers;
 use crate::phosphor::{Phosphor, PhosphorConfig};
+use crate::scene::write_samples;
 use crate::virtual_dac::VirtualDac;
 use anyhow::{Context, Result};
-use isoscope_core::dac::{Beam, Dac};
-use isoscope_core::engine::{Buffers, Engine, EngineConfig, Event, Geometry};
+use isoscope_core::dac::Dac;
+use isoscope_core::engine::{Engine, EngineConfig, Event};
 use std::io::{ErrorKind, Read, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
-
-/// The engine's memory on the heap.
-#[derive(Debug, Clone)]
-pub struct HostBuffers {
-    slices: Vec<u8>,
-    rows: Vec<f32>,
-    surfaces: Vec<u8>,
-    scratch: Vec<u8>,
-}
-
-impl HostBuffers {
-    /// Room for slices of `slice_bytes`, rows of `extent` samples, and
-    /// `points` points in each surface (with the scratch to stitch and
-    /// order them all: 8 bytes a point).
-    pub fn new(slice_bytes: usize, extent: usize, points: usize) -> Self {
-        Self {
-            slices: vec![0; 2 * slice_bytes],
-            rows: vec![0.0; 2 * extent],
-            surfaces: vec![0; 2 * Geometry::bytes_for(points)],
-            scratch: vec![0; 8 * points],
-        }
-    }
-
-    /// The buffers, lent to an engine.
-    pub fn buffers(&mut self) -> Buffers<'_> {
-        Buffers::halves(&mut self.slices, &mut self.rows, &mut self.surfaces, &mut self.scratch)
-    }
-}
 
 /// Line time the paced port may deliver at once after a pause (a DMA ring
 /// buffer's worth; it bounds how far the pacing can run ahead of the line).
@@ -245,7 +219,7 @@ impl<'a> Board<'a> {
                 let due = shown_volume
                     || self.last_snapshot.is_none_or(|t| t.elapsed() > Duration::from_millis(500));
                 if let (Some(path), true) = (&opts.samples, shown_volume) {
-                    write_samples(&play_frame(&self.engine, 1e6), path)?;
+                    write_samples(play_frame(&self.engine, 1e6).samples(), path)?;
                     writeln!(log, "{} samples {}", self.stamp(), path.display())?;
                 }
                 if let (Some(path), true) = (&opts.snapshot, due) {
@@ -272,19 +246,6 @@ pub fn play_frame(engine: &Engine<'_>, rate_hz: f64) -> VirtualDac {
     let mut dac = VirtualDac::new(rate_hz);
     let Ok(()) = dac.write(engine.frame());
     dac
-}
-
-/// Write a frame's samples as text: `x y beam` (beam 1 lit, 0 blanked), one
-/// sample a line.
-///
-/// # Errors
-/// The file cannot be written.
-pub fn write_samples(dac: &VirtualDac, path: &Path) -> Result<()> {
-    let mut text = String::with_capacity(dac.samples().len() * 12);
-    for s in dac.samples() {
-        text.push_str(&format!("{} {} {}\n", s.x, s.y, u8::from(s.beam == Beam::On)));
-    }
-    std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
 }
 
 /// Draw one frame of the board's picture from the virtual DAC on a fresh

@@ -24,6 +24,7 @@
 //!   DC-coupled sound card driving a real scope.
 
 pub mod animate;
+pub mod board;
 pub mod contour;
 pub mod device;
 pub mod formats;

@@ -38,19 +38,27 @@ impl WireVolume {
     /// # Errors
     /// An extent above 65535.
     pub fn from_loaded(v: &LoadedVolume) -> Result<Self> {
-        let Dims(nx, ny, nz) = v.dims;
+        Self::new(v.dims, &v.samples, v.spacing)
+    }
+
+    /// `samples` (x fastest) of a `dims` volume with voxel `spacing`.
+    ///
+    /// # Errors
+    /// An extent above 65535.
+    pub fn new(dims: Dims, samples: &Samples, spacing: [f32; 3]) -> Result<Self> {
+        let Dims(nx, ny, nz) = dims;
         let d = |n: usize, axis: &str| {
             u16::try_from(n)
                 .map_err(|_| anyhow!("the volume has {n} samples along {axis}; the protocol takes 65535"))
         };
         let dims = [d(nx, "x")?, d(ny, "y")?, d(nz, "z")?];
-        let (sample_type, bytes) = match &v.samples {
+        let (sample_type, bytes) = match samples {
             Samples::U8(s) => (SampleType::U8, s.clone()),
             Samples::U16(s) => (SampleType::U16, s.iter().flat_map(|x| x.to_le_bytes()).collect()),
             Samples::I16(s) => (SampleType::I16, s.iter().flat_map(|x| x.to_le_bytes()).collect()),
             Samples::F32(s) => (SampleType::F32, s.iter().flat_map(|x| x.to_le_bytes()).collect()),
         };
-        Ok(Self { dims, sample_type, spacing: v.spacing, bytes })
+        Ok(Self { dims, sample_type, spacing, bytes })
     }
 
     /// Bytes in one z slice.
@@ -322,6 +330,59 @@ fn crate_version() -> [u8; 3] {
     [v.next().unwrap_or(0), v.next().unwrap_or(0), v.next().unwrap_or(0)]
 }
 
+/// The commands that put `vol` on a board as `cfg` says, with consecutive
+/// sequence numbers from `seq0`: `SetView` (if `cfg.view`), `BeginVolume`,
+/// `SliceData` chunks of `cfg.chunk` bytes z slice by z slice, `EndVolume`.
+/// What [`send_volume`] sends, and what the host's in-process board
+/// ([`crate::scene`]) is fed: one way onto a board.
+pub fn volume_messages<'v>(
+    vol: &'v WireVolume,
+    cfg: &SendConfig,
+    levels: Levels,
+    seq0: u16,
+) -> impl Iterator<Item = Message<'v>> + 'v {
+    let (chunk, slice_bytes) = (cfg.chunk.max(1), vol.slice_bytes().max(1));
+    let seq = move |k: usize| seq0.wrapping_add(k as u16);
+    let head = usize::from(cfg.view.is_some());
+    let view = cfg.view.map(|v| {
+        let [yaw, pitch, roll] = v.angles;
+        Message::SetView {
+            seq: seq(0),
+            yaw,
+            pitch,
+            roll,
+            fov_deg: v.fov_deg,
+            spin_deg_per_s: v.spin_deg_per_s,
+        }
+    });
+    let begin = Message::BeginVolume {
+        seq: seq(head),
+        dims: vol.dims,
+        sample_type: vol.sample_type,
+        spacing: vol.spacing,
+        levels,
+        axes: cfg.axes,
+        every: cfg.every,
+    };
+    let data = vol
+        .bytes
+        .chunks(slice_bytes)
+        .enumerate()
+        .flat_map(move |(z, slice)| {
+            slice.chunks(chunk).enumerate().map(move |(k, data)| (z as u16, (k * chunk) as u32, data))
+        })
+        .enumerate()
+        .map(move |(k, (slice, offset, data))| Message::SliceData {
+            seq: seq(head + 1 + k),
+            slice,
+            offset,
+            data,
+        });
+    let chunks: usize = vol.bytes.chunks(slice_bytes).map(|s| s.len().div_ceil(chunk)).sum();
+    let end = Message::EndVolume { seq: seq(head + 1 + chunks) };
+    view.into_iter().chain(core::iter::once(begin)).chain(data).chain(core::iter::once(end))
+}
+
 /// Stream `vol` to the board behind `reader`/`writer`.
 ///
 /// # Errors
@@ -359,40 +420,8 @@ where
     }
     // Every command frame, in order, with consecutive sequence numbers.
     let seq0 = (Instant::now().elapsed().subsec_nanos() as u16) ^ 0x5A5A;
-    let mut frames: Vec<Vec<u8>> = Vec::new();
     let seq = |k: usize| seq0.wrapping_add(k as u16);
-    if let Some(v) = cfg.view {
-        let [yaw, pitch, roll] = v.angles;
-        frames.push(frame(&Message::SetView {
-            seq: seq(frames.len()),
-            yaw,
-            pitch,
-            roll,
-            fov_deg: v.fov_deg,
-            spin_deg_per_s: v.spin_deg_per_s,
-        })?);
-    }
-    frames.push(frame(&Message::BeginVolume {
-        seq: seq(frames.len()),
-        dims: vol.dims,
-        sample_type: vol.sample_type,
-        spacing: vol.spacing,
-        levels,
-        axes: cfg.axes,
-        every: cfg.every,
-    })?);
-    let slice_bytes = vol.slice_bytes();
-    for (z, slice) in vol.bytes.chunks(slice_bytes.max(1)).enumerate() {
-        for (k, data) in slice.chunks(cfg.chunk).enumerate() {
-            frames.push(frame(&Message::SliceData {
-                seq: seq(frames.len()),
-                slice: z as u16,
-                offset: (k * cfg.chunk) as u32,
-                data,
-            })?);
-        }
-    }
-    frames.push(frame(&Message::EndVolume { seq: seq(frames.len()) })?);
+    let frames = volume_messages(vol, cfg, levels, seq0).map(|m| frame(&m)).collect::<Result<Vec<_>>>()?;
     let n = frames.len();
     let window = cfg.window.max(1);
     // Round trip allowance: a window of frames on the line, and time for

@@ -3,15 +3,18 @@
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use isoscope_core::beam::BeamConfig;
+use isoscope_core::engine::Board;
 use isoscope_core::grid::{Plane, Volume};
 use isoscope_core::sample::Sample;
 use isoscope_core::trace::Traversal;
 use isoscope_core::view::{Projection, View};
-use isoscope_sim::animate::{AnimConfig, AnimFormat, animate_surface};
+use isoscope_sim::animate::{AnimConfig, AnimFormat, animate};
+use isoscope_sim::board::frames_for;
 use isoscope_sim::contour::{Job, contour_volume, work_units, write_csv};
+use isoscope_sim::link::WireVolume;
 use isoscope_sim::phosphor::PhosphorConfig;
 use isoscope_sim::progress::Progress;
-use isoscope_sim::scene::{self, Order, Scene, SceneConfig, Surface, refresh_samples};
+use isoscope_sim::scene::{self, Scene, SceneConfig, write_samples};
 use isoscope_sim::volume::{DemoSpec, Dims, Dtype, Endian, LoadedVolume, Samples};
 use isoscope_sim::wav::{WavChannels, WavConfig, WavFormat, audio_beam, write_wav_file};
 use std::io::Write;
@@ -45,8 +48,9 @@ enum Cmd {
     /// Contour every slice of a volume (a chicken-wire surface) and export the
     /// drawing commands as CSV: level,axis,slice,op,x,y,z.
     Contour(ContourArgs),
-    /// Build one display frame (contour, project, cull, stitch, order,
-    /// schedule the beam) and print its statistics as key=value lines.
+    /// Build one frame as the board does (contour, cull, stitch, order,
+    /// project, schedule the beam) and print its statistics as key=value
+    /// lines.
     Stats(StatsArgs),
     /// Describe a volume: dims, type, spacing, value range, a histogram and
     /// suggested contour levels.
@@ -132,6 +136,10 @@ struct DeviceArgs {
     /// Exit after this many volumes are shown.
     #[arg(long, value_name = "N")]
     exit_after: Option<u32>,
+    /// Be this board: its capacities and sample clock (f407: the
+    /// firmware's STM32F407). Without it, the sizes below.
+    #[arg(long, value_name = "NAME", value_parser = parse_board, conflicts_with_all = ["max_slice_bytes", "points"])]
+    board: Option<Board>,
     /// Largest slice the board takes, in bytes (nx * ny * sample size).
     #[arg(long, default_value_t = 1 << 20)]
     max_slice_bytes: usize,
@@ -207,6 +215,8 @@ struct WavArgs {
     /// 32-bit float samples instead of 16-bit PCM.
     #[arg(long)]
     float: bool,
+    #[command(flatten)]
+    board: BoardArgs,
 }
 
 /// What to contour: a volume, its levels and its slicing planes.
@@ -256,21 +266,24 @@ struct BeamArgs {
     /// beam speed and so the brightness).
     #[arg(long, default_value_t = BeamConfig::default().lit_step)]
     lit_step: f32,
-    /// DAC sample rate in samples per second, for frames per second.
-    #[arg(long, default_value_t = 1e6)]
-    rate: f32,
-    /// Polyline order: optimized (cull, stitch, order) or input (as
-    /// contoured, for comparison).
-    #[arg(long, value_enum, default_value = "optimized")]
-    order: OrderArg,
+    /// DAC sample rate in samples per second, for frames per second
+    /// (default: the board's, else 1 MS/s).
+    #[arg(long)]
+    rate: Option<f32>,
 }
 
-#[derive(Clone, Copy, Debug, ValueEnum)]
-enum OrderArg {
-    /// Cull duplicates, stitch, merge collinear runs, order for short jumps.
-    Optimized,
-    /// The contour fragments as they come.
-    Input,
+/// Whose memory draws the picture, and where its samples go.
+#[derive(Args, Debug, Clone)]
+struct BoardArgs {
+    /// Draw as this board draws: its capacities (a surface it cannot hold is
+    /// cut as on the board, and a note says how much) and its sample clock.
+    /// f407: the firmware's STM32F407. Default: room for the whole surface.
+    #[arg(long, value_name = "NAME", value_parser = parse_board)]
+    board: Option<Board>,
+    /// Write one frame's DAC samples to this file, `x y beam` a line (the
+    /// format of `device --samples`).
+    #[arg(long, value_name = "FILE")]
+    samples: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -281,6 +294,8 @@ struct StatsArgs {
     view: ViewArgs,
     #[command(flatten)]
     beam: BeamArgs,
+    #[command(flatten)]
+    board: BoardArgs,
 }
 
 #[derive(Args, Debug, Clone)]
@@ -352,6 +367,14 @@ struct ContourArgs {
     view: ViewArgs,
 }
 
+/// A board named in the core ([`Board::ALL`]).
+fn parse_board(s: &str) -> Result<Board, String> {
+    Board::named(s.trim()).ok_or_else(|| {
+        let names: Vec<&str> = Board::ALL.iter().map(|b| b.name).collect();
+        format!("unknown board `{s}` (known: {})", names.join(", "))
+    })
+}
+
 /// A contour level: a finite number within the `f32` range.
 fn parse_level(s: &str) -> Result<f32, String> {
     let x: f64 = s.trim().parse().map_err(|_| format!("`{s}` is not a number"))?;
@@ -408,7 +431,8 @@ fn contour_svg(args: &ContourArgs) -> Result<()> {
     let scene_args = StatsArgs {
         input: args.input.clone(),
         view: ViewArgs { ..args.view },
-        beam: BeamArgs { lit_step: BeamConfig::default().lit_step, rate: 1e6, order: OrderArg::Optimized },
+        beam: BeamArgs { lit_step: BeamConfig::default().lit_step, rate: None },
+        board: BoardArgs { board: None, samples: None },
     };
     let scene = build_scene(&scene_args, false)?;
     let bits = args.view.bits;
@@ -416,11 +440,15 @@ fn contour_svg(args: &ContourArgs) -> Result<()> {
         Some(path) => {
             let f =
                 std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
-            isoscope_sim::svg::write_svg(std::io::BufWriter::new(f), &scene.list, bits)
+            isoscope_sim::svg::write_svg(std::io::BufWriter::new(f), &scene.commands, bits)
                 .with_context(|| format!("cannot write {}", path.display()))
         }
-        None => isoscope_sim::svg::write_svg(std::io::stdout().lock(), &scene.list, bits)
-            .context("cannot write to standard output"),
+        None => match isoscope_sim::svg::write_svg(std::io::stdout().lock(), &scene.commands, bits) {
+            Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
+                Err(e).context("cannot write to standard output")
+            }
+            _ => Ok(()),
+        },
     }
 }
 
@@ -537,26 +565,25 @@ fn render(args: &RenderArgs) -> Result<()> {
     if let Some(path) = &args.animate {
         return render_animation(args, path);
     }
+    if args.frames == 0 {
+        bail!("--frames must be at least 1");
+    }
     let scene = build_scene(&args.scene, true)?;
     let mut cfg = PhosphorConfig::with_size(args.size, args.size);
     cfg.bits = args.scene.view.bits;
     cfg.show_blanked = args.show_blanked;
-    if args.frames == 0 {
-        bail!("--frames must be at least 1");
-    }
-    let beam = scene_beam(&args.scene);
     let progress = Progress::new("rendering frames", args.frames as usize);
-    let screen = scene::render(&scene, &beam, cfg, args.frames, Some(&progress))?;
+    let screen = scene::render(&scene, cfg, args.frames, Some(&progress))?;
     screen.write_png(&args.output).with_context(|| format!("cannot write {}", args.output.display()))?;
     eprintln!(
         "isoscope-sim: wrote {} ({}x{}; {} polylines, {} samples, {:.1} frames/s at {} samples/s)",
         args.output.display(),
         args.size,
         args.size,
-        scene.list.polyline_count(),
+        scene.polylines,
         scene.frame.samples,
-        scene.frame.fps(args.scene.beam.rate),
-        args.scene.beam.rate
+        scene.fps(),
+        scene.sample_rate_hz
     );
     Ok(())
 }
@@ -564,15 +591,21 @@ fn render(args: &RenderArgs) -> Result<()> {
 fn render_animation(args: &RenderArgs, path: &std::path::Path) -> Result<()> {
     let format = AnimFormat::from_path(path)
         .with_context(|| format!("{}: an animation is a .gif or an (animated) .png", path.display()))?;
-    let (surface, cfg) =
-        prepare(&args.scene.input, &args.scene.view, args.scene.beam.order, scene_beam(&args.scene), true)?;
+    let (volume, cfg) = prepare(
+        &args.scene.input,
+        &args.scene.view,
+        &args.scene.board,
+        scene_beam(&args.scene),
+        args.scene.beam.rate,
+        true,
+    )?;
     let mut picture = PhosphorConfig::with_size(args.size, args.size);
     picture.bits = args.scene.view.bits;
     picture.show_blanked = args.show_blanked;
     let anim = AnimConfig { frames: args.anim_frames, turn_deg: args.turn, format, ..AnimConfig::default() };
     let f = std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
     let progress = Progress::new("animating", anim.frames as usize);
-    let st = animate_surface(&surface, &cfg, picture, &anim, std::io::BufWriter::new(f), Some(&progress))
+    let st = animate(&volume, &cfg, picture, &anim, std::io::BufWriter::new(f), Some(&progress))
         .with_context(|| format!("cannot write {}", path.display()))?;
     eprintln!(
         "isoscope-sim: wrote {} ({} frames, {}x{}, {:.1} degrees a frame, {} bytes)",
@@ -590,15 +623,16 @@ fn scene_beam(args: &StatsArgs) -> BeamConfig {
     BeamConfig { bits: args.view.bits, lit_step: args.beam.lit_step, ..BeamConfig::default() }
 }
 
-/// Load the volume, contour it once (keeping 3D geometry) and make the
-/// scene configuration: everything a frame, an animation or a WAV needs.
+/// Load the volume and make the scene configuration: everything a frame,
+/// an animation or a WAV needs.
 fn prepare(
     input: &InputArgs,
     v: &ViewArgs,
-    order: OrderArg,
+    board: &BoardArgs,
     beam: BeamConfig,
+    rate: Option<f32>,
     auto_every: bool,
-) -> Result<(Surface, SceneConfig)> {
+) -> Result<(WireVolume, SceneConfig)> {
     let (vol, demo) = load(&input.source)?;
     let levels = levels_for(&input.levels, demo, Some(&vol))?;
     let planes = planes(&input.axes)?;
@@ -626,39 +660,44 @@ fn prepare(
         bits: v.bits,
         spacing: vol.spacing,
     };
-    let cfg = SceneConfig {
-        planes,
-        levels,
-        every,
-        view,
-        beam,
-        order: match order {
-            OrderArg::Optimized => Order::Optimized,
-            OrderArg::Input => Order::Input,
-        },
-        ..SceneConfig::default()
+    let base = match board.board {
+        Some(b) => SceneConfig::board(b, levels),
+        None => SceneConfig { levels, ..SceneConfig::default() },
     };
-    let Dims(nx, ny, nz) = vol.dims;
-    fn run<T: Sample>(data: &[T], d: (usize, usize, usize), cfg: &SceneConfig) -> Result<Surface> {
-        scene::contour_surface(&Volume::new(data, d.0, d.1, d.2)?, cfg)
-    }
-    let d = (nx, ny, nz);
-    let surface = match &vol.samples {
-        Samples::U8(s) => run(s, d, &cfg),
-        Samples::U16(s) => run(s, d, &cfg),
-        Samples::I16(s) => run(s, d, &cfg),
-        Samples::F32(s) => run(s, d, &cfg),
-    }?;
-    Ok((surface, cfg))
+    let sample_rate_hz = match rate {
+        Some(r) if !(r.is_finite() && r >= 1.0 && r <= u32::MAX as f32) => {
+            bail!("--rate must be a sample rate of at least 1 sample a second")
+        }
+        Some(r) => r as u32,
+        None => base.sample_rate_hz,
+    };
+    let cfg = SceneConfig { planes, every, view, beam, sample_rate_hz, ..base };
+    let wire = WireVolume::from_loaded(&vol)?;
+    Ok((wire, cfg))
 }
 
-/// One frame; `auto_every` lets a large volume default to every n-th slice.
+/// One frame; `auto_every` lets a large volume default to every n-th
+/// slice. Says what the board could not hold, writes `--samples`.
 fn build_scene(args: &StatsArgs, auto_every: bool) -> Result<Scene> {
-    let (surface, cfg) = prepare(&args.input, &args.view, args.beam.order, scene_beam(args), auto_every)?;
-    let mut scene = surface.scene(&cfg)?;
-    // The contouring happened in `prepare`: count it in the pipeline.
-    scene.seconds[0] += surface.seconds;
+    let (volume, cfg) =
+        prepare(&args.input, &args.view, &args.board, scene_beam(args), args.beam.rate, auto_every)?;
+    let progress = Progress::new("contouring (frames fed to the board)", frames_for(&volume, &cfg.send()?));
+    let scene = scene::with_board(&volume, &cfg, Some(&progress), |board, capacity| {
+        Ok(scene::scene_of(board, capacity, &cfg))
+    })?;
+    finish_scene(&scene, &args.board)?;
     Ok(scene)
+}
+
+/// The scene's remarks on standard error, its samples to `--samples`.
+fn finish_scene(scene: &Scene, board: &BoardArgs) -> Result<()> {
+    for r in scene.remarks() {
+        eprintln!("isoscope-sim: {r}");
+    }
+    if let Some(path) = &board.samples {
+        write_samples(&scene.samples, path)?;
+    }
+    Ok(())
 }
 
 fn wav(args: &WavArgs) -> Result<()> {
@@ -666,9 +705,9 @@ fn wav(args: &WavArgs) -> Result<()> {
     if let Some(step) = args.lit_step {
         beam.lit_step = step;
     }
-    let (surface, cfg) = prepare(&args.input, &args.view, OrderArg::Optimized, beam, true)?;
-    let scene = surface.scene(&cfg)?;
-    let frame = refresh_samples(&scene.list, &beam);
+    let (volume, cfg) = prepare(&args.input, &args.view, &args.board, beam, None, true)?;
+    let scene = scene::build(&volume, &cfg)?;
+    finish_scene(&scene, &args.board)?;
     let wcfg = WavConfig {
         rate_hz: args.audio_rate,
         channels: if args.beam_channel { WavChannels::WithBeam } else { WavChannels::Stereo },
@@ -678,7 +717,7 @@ fn wav(args: &WavArgs) -> Result<()> {
         invert_beam: args.invert_beam,
         ..WavConfig::default()
     };
-    let st = write_wav_file(&args.output, &frame, &wcfg)
+    let st = write_wav_file(&args.output, &scene.samples, &wcfg)
         .with_context(|| format!("cannot write {}", args.output.display()))?;
     eprintln!(
         "isoscope-sim: wrote {} ({:.2} s at {} Hz, {} channels; one frame is {} samples: {:.1} frames/s)",
@@ -699,13 +738,7 @@ fn send(args: &SendArgs) -> Result<()> {
     use isoscope_sim::link::{SendConfig, ViewSetting, WireVolume, open_port, send_volume};
     let (vol, demo) = load(&args.input.source)?;
     let levels = levels_for(&args.input.levels, demo, Some(&vol))?;
-    let axes = planes(&args.input.axes)?.iter().fold(0u8, |m, p| {
-        m | match p {
-            Plane::XY => isoscope_core::wire::AXIS_Z,
-            Plane::XZ => isoscope_core::wire::AXIS_Y,
-            Plane::YZ => isoscope_core::wire::AXIS_X,
-        }
-    });
+    let axes = scene::axes(&planes(&args.input.axes)?);
     let any_view = args.yaw.or(args.pitch).or(args.roll).or(args.perspective).or(args.spin).is_some();
     let view = any_view.then(|| ViewSetting {
         angles: [
@@ -747,8 +780,9 @@ fn send(args: &SendArgs) -> Result<()> {
 }
 
 fn device(args: &DeviceArgs) -> Result<()> {
-    use isoscope_sim::device::{Board, DeviceOptions, HostBuffers, Stop};
-    let opts = DeviceOptions {
+    use isoscope_sim::board::{HostBuffers, host_capacity};
+    use isoscope_sim::device::{Board as VirtualBoard, DeviceOptions, Stop};
+    let mut opts = DeviceOptions {
         baud: args.baud,
         snapshot: args.snapshot.clone(),
         size: args.size,
@@ -758,8 +792,15 @@ fn device(args: &DeviceArgs) -> Result<()> {
         points: args.points,
         ..DeviceOptions::default()
     };
-    let mut mem = HostBuffers::new(opts.slice_bytes, opts.extent, opts.points);
-    let mut board = Board::new(&mut mem, &opts)?;
+    let capacity = match args.board {
+        Some(b) => {
+            opts.engine = b.engine_config();
+            b.capacity
+        }
+        None => host_capacity(opts.slice_bytes, opts.extent, opts.points),
+    };
+    let mut mem = HostBuffers::new(&capacity);
+    let mut board = VirtualBoard::new(&mut mem, &opts)?;
     let stdout = std::io::stdout();
     let mut log = stdout.lock();
     if let Some(addr) = &args.tcp {
@@ -788,7 +829,7 @@ fn device(args: &DeviceArgs) -> Result<()> {
 
 fn stats(args: &StatsArgs) -> Result<()> {
     let scene = build_scene(args, false)?;
-    print!("{}", scene.report(args.beam.rate));
+    print!("{}", scene.report());
     Ok(())
 }
 

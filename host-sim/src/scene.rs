@@ -1,47 +1,36 @@
-//! A whole frame on the host: contour the chosen slices, project them,
-//! build the display list, cull, stitch, merge, order, and schedule the beam.
+//! A frame on the host, exactly as a board draws it: the volume goes to an
+//! in-process board ([`crate::board::InProcess`]) as the frames `send`
+//! puts on the wire; the board's engine contours, culls, stitches, merges
+//! and orders it in 3D in its bounded memory, and its frame
+//! ([`isoscope_core::engine::Engine::frame`]) is the samples the firmware
+//! plays. There is no other picture pipeline on the host.
 //!
-//! This is the pipeline the firmware runs, with `Vec` storage instead of
-//! fixed arrays; it is single-threaded on purpose, so that its timing says
-//! what one core (and, scaled, the MCU) would need.
+//! With [`Memory::Board`] the engine gets that board's capacities (a
+//! surface that does not fit is cut as on the board, and said); with
+//! [`Memory::Host`] it gets room for the whole surface (it grows until the
+//! surface fits): the same code, more memory.
 
-use anyhow::{Context, Result, anyhow};
-use isoscope_core::beam::{BeamConfig, FrameStats, Park, Scheduler, frame_stats};
-use isoscope_core::command::{Command, Point3};
+use crate::board::{HostBuffers, InProcess, Loaded, check_levels, host_capacity};
+use crate::link::{SendConfig, WireVolume};
+use crate::progress::Progress;
+use anyhow::{Context, Result, bail};
+use isoscope_core::beam::{BeamConfig, FrameStats};
+use isoscope_core::command::Command;
 use isoscope_core::dac::Sample as DacSample;
-use isoscope_core::display::{
-    DisplayStore, OptimizeConfig, OptimizeStats, OrderConfig, OrderStats, ScratchStore,
-};
-use isoscope_core::grid::{Plane, Volume};
-use isoscope_core::sample::Sample;
+use isoscope_core::engine::{Board, Capacity, ChainStats, EngineConfig};
+use isoscope_core::grid::Plane;
 use isoscope_core::screen::ScreenPoint;
-use isoscope_core::surface::{SliceId, SurfaceSink, contour_slice};
-use isoscope_core::trace::Traversal;
-use isoscope_core::view::{Bounds, View, ViewTransform};
-use std::convert::Infallible;
-use std::time::Instant;
+use isoscope_core::view::View;
+use isoscope_core::wire::{AXIS_X, AXIS_Y, AXIS_Z, MAX_CHUNK};
 
-/// How the polylines are ordered for the beam.
+/// How much memory the engine gets.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum Order {
-    /// Cull, stitch, merge and order (the default).
+pub enum Memory {
+    /// Room for the whole surface (grown until it fits).
     #[default]
-    Optimized,
-    /// The contour fragments as they come, for comparison.
-    Input,
-}
-
-/// How the view is scaled to the screen.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum ViewFit {
-    /// The projected bounding box fills the screen ([`ViewTransform::fit`]):
-    /// the largest picture for one still view (the default).
-    #[default]
-    Box,
-    /// The bounding sphere fills the screen ([`ViewTransform::fit_sphere`]):
-    /// the scale does not depend on the angles, so a spinning view does not
-    /// breathe. For animation.
-    Sphere,
+    Host,
+    /// A board's capacities: what it would show, cut where it is cut.
+    Board(Board),
 }
 
 /// What to put on the screen.
@@ -49,249 +38,252 @@ pub enum ViewFit {
 pub struct SceneConfig {
     /// Slicing planes.
     pub planes: Vec<Plane>,
-    /// Contour levels.
+    /// Contour levels (at most [`isoscope_core::wire::MAX_LEVELS`]).
     pub levels: Vec<f32>,
-    /// Contour every `every`-th slice of each plane (1 = all).
+    /// Contour every `every`-th slice of each plane (1 = all, at most 255).
     pub every: usize,
-    /// The 3D view.
+    /// The 3D view (its spacing is the volume's; its bits are the beam's).
     pub view: View,
     /// The beam.
     pub beam: BeamConfig,
-    /// Ordering.
-    pub order: Order,
-    /// Collinear merge tolerance, DAC units.
-    pub tolerance: f32,
-    /// How the view is scaled to the screen.
-    pub fit: ViewFit,
+    /// DAC samples per second, for the refresh rate.
+    pub sample_rate_hz: u32,
+    /// How much memory the engine gets.
+    pub memory: Memory,
 }
 
 impl Default for SceneConfig {
     fn default() -> Self {
+        let e = EngineConfig::default();
         Self {
             planes: Plane::ALL.to_vec(),
             levels: vec![],
             every: 1,
-            view: View::default(),
-            beam: BeamConfig::default(),
-            order: Order::Optimized,
-            tolerance: OptimizeConfig::default().tolerance,
-            fit: ViewFit::Box,
+            view: e.view,
+            beam: e.beam,
+            sample_rate_hz: e.sample_rate_hz,
+            memory: Memory::Host,
         }
     }
 }
 
-/// A host display list: the core's `DisplayStore` over `Vec`s.
-pub type HostDisplayList = DisplayStore<Vec<ScreenPoint>, Vec<u8>>;
-
-/// A frame and what it took.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Scene {
-    /// The display list, in drawing order.
-    pub list: HostDisplayList,
-    /// Contour fragments (polylines before stitching).
-    pub fragments: usize,
-    /// Culling and stitching.
-    pub optimize: Option<OptimizeStats>,
-    /// Ordering.
-    pub ordering: Option<OrderStats>,
-    /// The beam schedule of one frame in a refresh loop ([`refresh_stats`]).
-    pub frame: FrameStats,
-    /// Seconds: contouring with projection, optimisation, ordering.
-    pub seconds: [f64; 3],
-}
-
-struct Project<'a> {
-    view: &'a ViewTransform,
-    out: &'a mut Vec<Command<ScreenPoint>>,
-}
-
-impl SurfaceSink for Project<'_> {
-    type Error = Infallible;
-    fn command(&mut self, _: SliceId, _: usize, c: Command<Point3>) -> Result<(), Infallible> {
-        self.out.push(c.map(|p| self.view.project(p)));
-        Ok(())
-    }
-}
-
-/// Build one frame of `volume` as `cfg` says.
-pub fn build<T: Sample>(volume: &Volume<'_, T>, cfg: &SceneConfig) -> Result<Scene> {
-    check_contouring(cfg)?;
-    cfg.beam.validate().context("invalid beam settings")?;
-    let (nx, ny, nz) = volume.dims();
-    let view = view_transform(cfg, Bounds::of_volume(nx, ny, nz)?)?;
-    let t0 = Instant::now();
-    let mut commands = Vec::new();
-    for &plane in &cfg.planes {
-        for index in (0..volume.slice_count(plane)).step_by(cfg.every) {
-            let mut sink = Project { view: &view, out: &mut commands };
-            contour_slice(volume, SliceId { plane, index }, &cfg.levels, Traversal::Corrected, &mut sink)
-                .map_err(|e| anyhow!("contouring {plane} slice {index}: {e}"))?;
+impl SceneConfig {
+    /// The settings of `board` (its sample clock, the engine's view and
+    /// beam), its capacities, and `levels`.
+    pub fn board(board: Board, levels: Vec<f32>) -> Self {
+        let e = board.engine_config();
+        Self {
+            levels,
+            view: e.view,
+            beam: e.beam,
+            sample_rate_hz: e.sample_rate_hz,
+            memory: Memory::Board(board),
+            ..Self::default()
         }
     }
-    finish(commands, cfg, t0)
-}
 
-/// The chicken-wire surface in voxel coordinates: contoured once, then
-/// projected for any number of views ([`Surface::scene`]), as a spinning
-/// view needs (the firmware keeps the same `Point3` commands and re-projects
-/// them when the view changes).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Surface {
-    /// The contour commands of every slice, in [`build`]'s order.
-    pub commands: Vec<Command<Point3>>,
-    /// The volume's bounds, which the view fits to the screen.
-    pub bounds: Bounds,
-    /// Seconds the contouring took.
-    pub seconds: f64,
-}
-
-struct Keep<'a>(&'a mut Vec<Command<Point3>>);
-
-impl SurfaceSink for Keep<'_> {
-    type Error = Infallible;
-    fn command(&mut self, _: SliceId, _: usize, c: Command<Point3>) -> Result<(), Infallible> {
-        self.0.push(c);
-        Ok(())
-    }
-}
-
-/// Contour the slices `cfg` chooses (its `planes`, `levels` and `every`;
-/// the view, beam and ordering are not used here) into a [`Surface`].
-///
-/// # Errors
-/// No level, a stride of 0, an empty volume, or a contouring error.
-pub fn contour_surface<T: Sample>(volume: &Volume<'_, T>, cfg: &SceneConfig) -> Result<Surface> {
-    check_contouring(cfg)?;
-    let (nx, ny, nz) = volume.dims();
-    let bounds = Bounds::of_volume(nx, ny, nz)?;
-    let t0 = Instant::now();
-    let mut commands = Vec::new();
-    for &plane in &cfg.planes {
-        for index in (0..volume.slice_count(plane)).step_by(cfg.every) {
-            let mut sink = Keep(&mut commands);
-            contour_slice(volume, SliceId { plane, index }, &cfg.levels, Traversal::Corrected, &mut sink)
-                .map_err(|e| anyhow!("contouring {plane} slice {index}: {e}"))?;
+    /// The engine's settings.
+    pub fn engine(&self) -> EngineConfig {
+        EngineConfig {
+            view: self.view,
+            beam: self.beam,
+            sample_rate_hz: self.sample_rate_hz,
+            ..EngineConfig::default()
         }
     }
-    Ok(Surface { commands, bounds, seconds: t0.elapsed().as_secs_f64() })
-}
 
-impl Surface {
-    /// The frame of this surface under `cfg`'s view, fit, beam and ordering
-    /// (its `planes`, `levels` and `every` were used when contouring): the
-    /// same display list and frame as [`build`] on the volume with the same
-    /// `cfg`. The first of the scene's `seconds` is the projection alone.
+    /// How the volume goes to the board: levels, planes, stride.
     ///
     /// # Errors
-    /// Invalid view or beam settings, or a display list too large.
-    pub fn scene(&self, cfg: &SceneConfig) -> Result<Scene> {
-        cfg.beam.validate().context("invalid beam settings")?;
-        let view = view_transform(cfg, self.bounds)?;
-        let t0 = Instant::now();
-        let commands = self.commands.iter().map(|c| c.map(|p| view.project(p))).collect();
-        finish(commands, cfg, t0)
+    /// No level or more than a board takes, a stride of 0 or above 255, or
+    /// no plane.
+    pub fn send(&self) -> Result<SendConfig> {
+        check_levels(&self.levels)?;
+        if self.planes.is_empty() {
+            bail!("no slicing plane");
+        }
+        let every = match u8::try_from(self.every) {
+            Ok(0) => bail!("the slice stride must be at least 1"),
+            Ok(n) => n,
+            Err(_) => bail!("the slice stride is {}; a board takes at most 255", self.every),
+        };
+        Ok(SendConfig {
+            levels: self.levels.clone(),
+            axes: axes(&self.planes),
+            every,
+            chunk: MAX_CHUNK,
+            ..SendConfig::default()
+        })
     }
 }
 
-fn check_contouring(cfg: &SceneConfig) -> Result<()> {
-    if cfg.levels.is_empty() {
-        return Err(anyhow!("no contour level"));
-    }
-    if cfg.every == 0 {
-        return Err(anyhow!("the slice stride must be at least 1"));
-    }
-    Ok(())
-}
-
-fn view_transform(cfg: &SceneConfig, bounds: Bounds) -> Result<ViewTransform> {
-    match cfg.fit {
-        ViewFit::Box => ViewTransform::fit(&cfg.view, bounds),
-        ViewFit::Sphere => ViewTransform::fit_sphere(&cfg.view, bounds),
-    }
-    .context("invalid view")
-}
-
-/// The display list, its optimisation and ordering, and the frame
-/// statistics of projected commands; `t0` is when they started coming.
-fn finish(commands: Vec<Command<ScreenPoint>>, cfg: &SceneConfig, t0: Instant) -> Result<Scene> {
-    let cap = commands.len().max(1);
-    let mut list = DisplayStore::with_storage(vec![ScreenPoint::default(); cap], vec![0u8; cap]);
-    for c in commands {
-        list.push(c).map_err(|_| anyhow!("the display list is full"))?;
-    }
-    let fragments = list.polyline_count();
-    let t1 = Instant::now();
-    let (mut optimize, mut ordering) = (None, None);
-    let mut t2 = t1;
-    if cfg.order == Order::Optimized {
-        let mut scratch = ScratchStore::with_storage(
-            vec![0u32; cap],
-            vec![0u32; cap],
-            vec![0u32; cap],
-            vec![0u32; cap],
-            vec![0u64; cap],
-            vec![ScreenPoint::default(); cap],
-            vec![0u8; cap],
-        );
-        optimize = Some(list.optimize(&mut scratch, &OptimizeConfig { tolerance: cfg.tolerance }));
-        t2 = Instant::now();
-        let park = cfg.beam.park_sample();
-        let start = ScreenPoint::new(f32::from(park.x), f32::from(park.y));
-        ordering = Some(list.order(&mut scratch, &OrderConfig { start, ..OrderConfig::default() }));
-    }
-    let t3 = Instant::now();
-    let frame = refresh_stats(&list, &cfg.beam);
-    Ok(Scene {
-        list,
-        fragments,
-        optimize,
-        ordering,
-        frame,
-        seconds: [(t1 - t0).as_secs_f64(), (t2 - t1).as_secs_f64(), (t3 - t2).as_secs_f64()],
+/// The wire's axis bits of `planes` (a plane is named by the axis it is
+/// normal to).
+pub fn axes(planes: &[Plane]) -> u8 {
+    planes.iter().fold(0u8, |m, p| {
+        m | match p {
+            Plane::XY => AXIS_Z,
+            Plane::XZ => AXIS_Y,
+            Plane::YZ => AXIS_X,
+        }
     })
 }
 
-/// The beam schedule of one frame in a refresh loop: the frame starts where
-/// the same frame ended (no trip to the park position between frames; the
-/// park position is for idle time), so the closing jump of the loop counts
-/// as blanked travel.
-pub fn refresh_stats(list: &HostDisplayList, beam: &BeamConfig) -> FrameStats {
-    let Some(mut s) = refresh_scheduler(list, beam) else {
-        return frame_stats(list.commands(), beam);
-    };
-    for _ in &mut s {}
-    s.stats()
+/// Points a host surface starts with; it grows four-fold until the surface
+/// fits, up to [`HOST_MAX_POINTS`].
+pub const HOST_START_POINTS: usize = 1 << 16;
+/// The most points a host surface grows to (16.7M: 210 MB of surfaces).
+pub const HOST_MAX_POINTS: usize = 1 << 24;
+
+/// A frame as the board plays it, and what it took.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scene {
+    /// One frame's DAC samples, from the park position back to it, as the
+    /// board plays them over and over.
+    pub samples: Vec<DacSample>,
+    /// The picture's drawing commands on the screen, in drawing order.
+    pub commands: Vec<Command<ScreenPoint>>,
+    /// The frame's statistics.
+    pub frame: FrameStats,
+    /// What culling, stitching, merging and ordering did.
+    pub chain: ChainStats,
+    /// What the board kept of the volume.
+    pub loaded: Loaded,
+    /// Polylines drawn (loops and dots included).
+    pub polylines: usize,
+    /// Points drawn.
+    pub points: usize,
+    /// The engine's memory.
+    pub capacity: Capacity,
+    /// Which board's memory, if one's.
+    pub board: Option<Board>,
+    /// DAC samples per second.
+    pub sample_rate_hz: u32,
+    /// Seconds: the transfer (decoding and contouring, slice by slice), and
+    /// the commit (stitch, order, count a frame).
+    pub seconds: [f64; 2],
 }
 
-/// The samples of one frame in a refresh loop, as [`refresh_stats`] counts
-/// them: the frame starts where it ends, so playing the samples over and
-/// over is the refresh loop, seamless (the loop's closing jump is the
-/// frame's first blanked jump). The last sample is blanked. Empty for an
-/// empty list.
-pub fn refresh_samples(list: &HostDisplayList, beam: &BeamConfig) -> Vec<DacSample> {
-    refresh_scheduler(list, beam).map(Iterator::collect).unwrap_or_default()
+/// The memory to start with for `vol` under `memory`.
+fn first_capacity(vol: &WireVolume, memory: Memory) -> Capacity {
+    match memory {
+        Memory::Board(b) => b.capacity,
+        Memory::Host => {
+            let extent = usize::from(vol.dims[0].max(vol.dims[1])).max(2);
+            host_capacity(vol.slice_bytes().max(64), extent, HOST_START_POINTS)
+        }
+    }
 }
 
-/// The scheduler of one refresh-loop frame: no return to the park
-/// position, starting where the last polyline ends; `None` for an empty
-/// list.
-fn refresh_scheduler<'a>(
-    list: &'a HostDisplayList,
-    beam: &BeamConfig,
-) -> Option<Scheduler<impl Iterator<Item = Command<ScreenPoint>> + 'a>> {
-    let last = list.polylines().last()?;
-    let end = match (last.closed, last.points.first(), last.points.last()) {
-        (true, Some(&p), _) | (false, _, Some(&p)) => p,
-        _ => ScreenPoint::new(f32::NAN, f32::NAN),
-    };
-    let cfg = BeamConfig { park: Park { return_at_end: false, ..beam.park }, ..*beam };
-    Some(Scheduler::with_start(list.commands(), &cfg, end))
+/// Put `vol` on an in-process board with `cfg`'s memory and settings, and
+/// hand it to `f`. With [`Memory::Host`] the memory grows until the whole
+/// surface fits (contouring again each time). `progress` counts the frames
+/// fed ([`crate::board::frames_for`]).
+///
+/// # Errors
+/// Invalid settings, a volume the board refuses, or `f`'s error.
+pub fn with_board<R>(
+    vol: &WireVolume,
+    cfg: &SceneConfig,
+    progress: Option<&Progress>,
+    f: impl FnOnce(&mut InProcess<'_>, Capacity) -> Result<R>,
+) -> Result<R> {
+    let send = cfg.send()?;
+    cfg.beam.validate().context("invalid beam settings")?;
+    let mut capacity = first_capacity(vol, cfg.memory);
+    loop {
+        let mut mem = HostBuffers::new(&capacity);
+        let mut board = InProcess::new(&mut mem, cfg.engine())?;
+        let loaded = board.load(vol, &send, progress).context("putting the volume on the board")?;
+        let grow = cfg.memory == Memory::Host && !loaded.whole() && capacity.points < HOST_MAX_POINTS;
+        if grow {
+            capacity = host_capacity(capacity.slice_bytes, capacity.extent, capacity.points * 4);
+            continue;
+        }
+        return f(&mut board, capacity);
+    }
+}
+
+/// Build the frame of `vol` as `cfg` says.
+///
+/// # Errors
+/// As [`with_board`].
+pub fn build(vol: &WireVolume, cfg: &SceneConfig) -> Result<Scene> {
+    with_board(vol, cfg, None, |board, capacity| Ok(scene_of(board, capacity, cfg)))
+}
+
+/// The scene the board shows now.
+pub fn scene_of(board: &InProcess<'_>, capacity: Capacity, cfg: &SceneConfig) -> Scene {
+    let engine = board.engine();
+    let mut frame = engine.frame();
+    let samples: Vec<DacSample> = frame.by_ref().collect();
+    let surface = engine.surface();
+    Scene {
+        samples,
+        commands: engine.commands().collect(),
+        frame: frame.stats(),
+        chain: engine.chain_stats(),
+        loaded: board.loaded(),
+        polylines: surface.map_or(0, |s| s.polylines()),
+        points: surface.map_or(0, |s| s.len()),
+        capacity,
+        board: match cfg.memory {
+            Memory::Board(b) => Some(b),
+            Memory::Host => None,
+        },
+        sample_rate_hz: cfg.sample_rate_hz,
+        seconds: board.loaded().seconds,
+    }
 }
 
 impl Scene {
+    /// Blanked travel as a share of lit length.
+    pub fn blank_ratio(&self) -> f32 {
+        self.frame.blank_length / self.frame.lit_length.max(f32::MIN_POSITIVE)
+    }
+
+    /// Refreshes per second at the sample rate.
+    pub fn fps(&self) -> f32 {
+        self.frame.fps(self.sample_rate_hz as f32)
+    }
+
+    /// A `note:` line when the board's memory cut the picture short, or a
+    /// warning when nothing is drawn.
+    pub fn remarks(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        let l = &self.loaded;
+        if !l.whole() {
+            let holder = match self.board {
+                Some(b) => format!("the {} board", b.name),
+                None => "the host's memory".into(),
+            };
+            let mut what = Vec::new();
+            if l.dropped > 0 {
+                let pieces = u64::from(l.commands) + u64::from(l.dropped);
+                what.push(format!("{} of the surface's {pieces} pieces were dropped", l.dropped));
+            }
+            if l.cut > 0 {
+                what.push(format!("{} points did not fit its {}-point picture", l.cut, self.capacity.points));
+            }
+            if !l.ordered {
+                what.push("there was no room to stitch and order it (drawn as contoured)".into());
+            }
+            out.push(format!(
+                "note: {holder} holds less than this surface: {}; draw fewer slices (--every), \
+                 fewer planes (--axes) or fewer levels for the whole of it",
+                what.join(", ")
+            ));
+        }
+        if self.frame.lit_samples == 0 {
+            out.push("warning: nothing is drawn (no contour at these levels on these slices)".into());
+        }
+        out
+    }
+
     /// The frame statistics as `key=value` lines.
-    pub fn report(&self, sample_rate_hz: f32) -> String {
+    pub fn report(&self) -> String {
         let f = &self.frame;
+        let c = &self.chain;
         let mut s = String::new();
         let mut kv = |k: &str, v: String| {
             s.push_str(k);
@@ -299,36 +291,53 @@ impl Scene {
             s.push_str(&v);
             s.push('\n');
         };
-        kv("fragments", self.fragments.to_string());
-        kv("polylines", self.list.polyline_count().to_string());
-        kv("points", self.list.len().to_string());
+        kv("board", self.board.map_or("host".into(), |b| b.name.to_string()));
+        kv("capacity_points", self.capacity.points.to_string());
+        kv("fragments", c.fragments.to_string());
+        kv("pieces_dropped", self.loaded.dropped.to_string());
+        kv("points_cut", self.loaded.cut.to_string());
+        kv("polylines", self.polylines.to_string());
+        kv("points", self.points.to_string());
         kv("dots", f.points.to_string());
         kv("lit_length", format!("{:.1}", f.lit_length));
         kv("blank_length", format!("{:.1}", f.blank_length));
-        kv("blank_ratio", format!("{:.4}", f.blank_length / f.lit_length.max(f32::MIN_POSITIVE)));
+        kv("blank_ratio", format!("{:.4}", self.blank_ratio()));
         kv("samples", f.samples.to_string());
         kv("lit_samples", f.lit_samples.to_string());
-        kv("fps_at_1msps", format!("{:.2}", f.fps(sample_rate_hz)));
-        if let Some(o) = &self.optimize {
-            kv("duplicate_segments", o.duplicate_segments.to_string());
-            kv("merged_points", o.merged_points.to_string());
-        }
-        kv("contour_ms", format!("{:.3}", self.seconds[0] * 1e3));
-        kv("optimize_ms", format!("{:.3}", self.seconds[1] * 1e3));
-        kv("order_ms", format!("{:.3}", self.seconds[2] * 1e3));
+        kv("sample_rate_hz", self.sample_rate_hz.to_string());
+        kv("fps", format!("{:.2}", self.fps()));
+        kv("duplicate_segments", c.duplicate_segments.to_string());
+        kv("merged_points", c.merged.to_string());
+        kv("transfer_ms", format!("{:.3}", self.seconds[0] * 1e3));
+        kv("commit_ms", format!("{:.3}", self.seconds[1] * 1e3));
         kv("pipeline_ms", format!("{:.3}", self.seconds.iter().sum::<f64>() * 1e3));
         s
     }
 }
 
+/// Write `samples` as text, `x y beam` a line (beam 1 lit, 0 blanked): the
+/// format of `device --samples`, `render --samples`, `stats --samples` and
+/// `wav --samples`.
+///
+/// # Errors
+/// The file cannot be written.
+pub fn write_samples(samples: &[DacSample], path: &std::path::Path) -> Result<()> {
+    use isoscope_core::dac::Beam;
+    use std::fmt::Write as _;
+    let mut text = String::with_capacity(samples.len() * 12);
+    for s in samples {
+        let _ = writeln!(text, "{} {} {}", s.x, s.y, u8::from(s.beam == Beam::On));
+    }
+    std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
+}
+
 /// Draw `frames` refreshes of the scene's frame on a simulated phosphor,
-/// through the beam scheduler, as the scope would show it.
+/// as the scope would show it.
 ///
 /// # Errors
 /// An invalid picture configuration.
 pub fn render(
     scene: &Scene,
-    beam: &BeamConfig,
     picture: crate::phosphor::PhosphorConfig,
     frames: u32,
     progress: Option<&crate::progress::Progress>,
@@ -336,7 +345,7 @@ pub fn render(
     let mut screen = crate::phosphor::Phosphor::new(picture).context("invalid picture settings")?;
     for _ in 0..frames.max(1) {
         screen.decay();
-        screen.deposit(Scheduler::new(scene.list.commands(), beam));
+        screen.deposit(scene.samples.iter().copied());
         if let Some(p) = progress {
             p.inc();
         }

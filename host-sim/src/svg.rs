@@ -1,12 +1,15 @@
-//! The display list as SVG: one `polyline` (or `polygon`, or `circle` for a
-//! dot) per display-list polyline, in drawing order, in DAC units with y up
-//! (flipped for SVG), green on black like the scope.
+//! The board's picture as SVG: one `polyline` (a closed loop ends where it
+//! began) or `circle` (a dot) per polyline of the drawing commands, in
+//! drawing order, in DAC units with y up (flipped for SVG), green on black
+//! like the scope.
 
-use crate::scene::HostDisplayList;
+use isoscope_core::command::Command;
+use isoscope_core::screen::ScreenPoint;
 use std::io::Write;
 
-/// Write `list` (DAC codes `0 ..= 2^bits - 1`) as an SVG document.
-pub fn write_svg(mut w: impl Write, list: &HostDisplayList, bits: u8) -> std::io::Result<()> {
+/// Write the drawing `commands` (DAC codes `0 ..= 2^bits - 1`) as an SVG
+/// document.
+pub fn write_svg(mut w: impl Write, commands: &[Command<ScreenPoint>], bits: u8) -> std::io::Result<()> {
     let max = f32::from(u16::MAX >> (16 - bits.clamp(1, 16)));
     // Stroke width: about one pixel of a 1024-pixel rendering.
     let stroke = (max + 1.0) / 1024.0;
@@ -20,18 +23,29 @@ pub fn write_svg(mut w: impl Write, list: &HostDisplayList, bits: u8) -> std::io
         w,
         r##"<g fill="none" stroke="#3c3" stroke-width="{stroke}" stroke-linejoin="round" stroke-linecap="round">"##
     )?;
-    for p in list.polylines() {
-        let pts: Vec<String> = p.points.iter().map(|q| format!("{:.2},{:.2}", q.x, max - q.y)).collect();
-        if p.dot || p.points.len() == 1 {
-            if let Some(q) = p.points.first() {
-                writeln!(w, r##"<circle cx="{:.2}" cy="{:.2}" r="{stroke}" fill="#3c3"/>"##, q.x, max - q.y)?;
-            }
-        } else if p.closed {
-            writeln!(w, r#"<polygon points="{}"/>"#, pts.join(" "))?;
-        } else {
+    let mut line: Vec<ScreenPoint> = Vec::new();
+    let flush = |w: &mut dyn Write, line: &mut Vec<ScreenPoint>| -> std::io::Result<()> {
+        if line.len() > 1 {
+            let pts: Vec<String> = line.iter().map(|q| format!("{:.2},{:.2}", q.x, max - q.y)).collect();
             writeln!(w, r#"<polyline points="{}"/>"#, pts.join(" "))?;
         }
+        line.clear();
+        Ok(())
+    };
+    for c in commands {
+        match *c {
+            Command::MoveTo(p) => {
+                flush(&mut w, &mut line)?;
+                line.push(p);
+            }
+            Command::LineTo(p) => line.push(p),
+            Command::Point(q) => {
+                flush(&mut w, &mut line)?;
+                writeln!(w, r##"<circle cx="{:.2}" cy="{:.2}" r="{stroke}" fill="#3c3"/>"##, q.x, max - q.y)?;
+            }
+        }
     }
+    flush(&mut w, &mut line)?;
     writeln!(w, "</g>\n</svg>")?;
     w.flush()
 }
@@ -39,20 +53,11 @@ pub fn write_svg(mut w: impl Write, list: &HostDisplayList, bits: u8) -> std::io
 #[cfg(test)]
 mod tests {
     use super::*;
-    use isoscope_core::command::Command;
-    use isoscope_core::display::DisplayStore;
-    use isoscope_core::screen::ScreenPoint;
-
     #[test]
-    fn polylines_polygons_and_dots() {
-        let mut list: HostDisplayList =
-            DisplayStore::with_storage(vec![ScreenPoint::default(); 8], vec![0; 8]);
+    fn polylines_and_dots() {
         let p = ScreenPoint::new;
-        for c in
-            [Command::MoveTo(p(0.0, 0.0)), Command::LineTo(p(4095.0, 4095.0)), Command::Point(p(10.0, 20.0))]
-        {
-            list.push(c).unwrap();
-        }
+        let list =
+            [Command::MoveTo(p(0.0, 0.0)), Command::LineTo(p(4095.0, 4095.0)), Command::Point(p(10.0, 20.0))];
         let mut out = Vec::new();
         write_svg(&mut out, &list, 12).unwrap();
         let s = String::from_utf8(out).unwrap();

@@ -670,17 +670,18 @@ mod tests {
 
     #[test]
     fn a_scene_round_trips_through_a_float_file() {
-        use crate::scene::{SceneConfig, build, refresh_samples};
+        use crate::link::WireVolume;
+        use crate::scene::{SceneConfig, build};
+        use crate::volume::{Dims, Samples};
         use isoscope_core::demo::Demo;
-        use isoscope_core::grid::Volume;
         let n = 12;
         let mut data = vec![0f32; n * n * n];
         Demo::Hydrogen.fill(n, &mut data).unwrap();
-        let volume = Volume::new(&data, n, n, n).unwrap();
+        let volume = WireVolume::new(Dims(n, n, n), &Samples::F32(data), [1.0; 3]).unwrap();
         let beam = audio_beam(48_000, 12);
         let scene =
             build(&volume, &SceneConfig { levels: vec![0.1], beam, ..SceneConfig::default() }).unwrap();
-        let frame = refresh_samples(&scene.list, &beam);
+        let frame = scene.samples.clone();
         assert_eq!(frame.len() as u64, scene.frame.samples);
         let cfg = WavConfig {
             channels: WavChannels::WithBeam,

@@ -566,29 +566,41 @@ fn every_error_has_the_isoscope_prefix() {
     assert_error(&["--demo", "gyroid:1"], &["gyroid:1"]);
 }
 
-/// `stats` prints the frame statistics of the display pipeline.
+/// `stats` prints the frame statistics of the board's picture, on the
+/// host's memory or a named board's.
 #[test]
 fn stats_reports_the_frame() {
-    let kv = |order: &str| -> std::collections::HashMap<String, f64> {
-        let out = run(&["stats", "--demo", "hydrogen:16", "--order", order]);
+    let kv = |extra: &[&str]| -> std::collections::HashMap<String, String> {
+        let mut args = vec!["stats", "--demo", "hydrogen:16"];
+        args.extend_from_slice(extra);
+        let out = run(&args);
         assert!(out.status.success(), "{}", text(&out.stderr));
         text(&out.stdout)
             .lines()
             .map(|l| {
                 let (k, v) = l.split_once('=').unwrap();
-                (k.to_string(), v.parse().unwrap())
+                (k.to_string(), v.to_string())
             })
             .collect()
     };
-    let (input, opt) = (kv("input"), kv("optimized"));
-    for k in ["fragments", "polylines", "points", "lit_length", "blank_length", "samples", "fps_at_1msps"] {
-        assert!(input.contains_key(k) && opt.contains_key(k), "{k} missing");
+    let num = |m: &std::collections::HashMap<String, String>, k: &str| -> f64 {
+        m.get(k).unwrap_or_else(|| panic!("{k} missing: {m:?}")).parse().unwrap()
+    };
+    let (host, board) = (kv(&[]), kv(&["--board", "f407"]));
+    assert_eq!(host["board"], "host");
+    assert_eq!(board["board"], "f407");
+    assert_eq!(num(&board, "capacity_points"), 8192.0);
+    for m in [&host, &board] {
+        for k in ["fragments", "polylines", "points", "lit_length", "blank_length", "samples", "fps"] {
+            assert!(num(m, k) > 0.0, "{k}");
+        }
+        assert!(num(m, "polylines") < num(m, "fragments"), "stitched");
+        assert!(num(m, "blank_ratio") < 0.2);
+        assert_eq!(num(m, "points_cut"), 0.0);
     }
-    assert_eq!(input["fragments"], opt["fragments"]);
-    assert_eq!(input["fragments"], input["polylines"]);
-    assert!(opt["polylines"] < input["polylines"]);
-    assert!(opt["blank_length"] < input["blank_length"]);
-    assert!(opt["fps_at_1msps"] > input["fps_at_1msps"]);
+    let out = run(&["stats", "--demo", "hydrogen:16", "--board", "nosuch"]);
+    assert!(!out.status.success());
+    assert!(text(&out.stderr).contains("unknown board `nosuch` (known: f407)"), "{}", text(&out.stderr));
 }
 
 #[test]

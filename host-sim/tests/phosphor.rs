@@ -1,21 +1,20 @@
 //! The phosphor on a real frame: the hydrogen demo through the whole
-//! pipeline (contour, project, display list, beam scheduler) into a
+//! pipeline (the board's engine in process, its beam scheduler) into a
 //! [`Phosphor`] used as the DAC.
 
-use isoscope_core::beam::{BeamConfig, Scheduler};
 use isoscope_core::dac::{Beam, Dac, Sample};
 use isoscope_core::demo::Demo;
-use isoscope_core::grid::Volume;
+use isoscope_sim::link::WireVolume;
 use isoscope_sim::phosphor::{Phosphor, PhosphorConfig};
 use isoscope_sim::scene::{SceneConfig, build};
+use isoscope_sim::volume::{Dims, Samples};
 
 /// One scheduled frame of the hydrogen orbital at `n`^3, level 0.1.
 fn hydrogen_frame(n: usize) -> Vec<Sample> {
     let mut data = vec![0.0f32; n * n * n];
     Demo::Hydrogen.fill(n, &mut data).unwrap();
-    let volume = Volume::new(&data, n, n, n).unwrap();
-    let scene = build(&volume, &SceneConfig { levels: vec![0.1], ..SceneConfig::default() }).unwrap();
-    Scheduler::new(scene.list.commands(), &BeamConfig::default()).collect()
+    let volume = WireVolume::new(Dims(n, n, n), &Samples::F32(data), [1.0; 3]).unwrap();
+    build(&volume, &SceneConfig { levels: vec![0.1], ..SceneConfig::default() }).unwrap().samples
 }
 
 #[test]

@@ -13,6 +13,21 @@ pub fn demo_samples(demo: Demo, n: usize) -> Vec<f32> {
     data
 }
 
+/// The `n`^3 samples of a built-in demo as they go to a board.
+pub fn demo_wire(demo: Demo, n: usize) -> isoscope_sim::link::WireVolume {
+    let samples = isoscope_sim::volume::Samples::F32(demo_samples(demo, n));
+    isoscope_sim::link::WireVolume::new(isoscope_sim::volume::Dims(n, n, n), &samples, [1.0; 3])
+        .expect("demo volume")
+}
+
+/// A cached real data file (see [`real_data`]) as it goes to a board.
+pub fn real_wire(name: &str) -> isoscope_sim::link::WireVolume {
+    let v = isoscope_sim::volume::LoadedVolume::read_known(&real_data(name))
+        .expect("a readable file")
+        .expect("a known format");
+    isoscope_sim::link::WireVolume::from_loaded(&v).expect("a volume a board takes")
+}
+
 /// Contour the `n`^3 demo at `levels` on `planes` with the corrected
 /// traversal on `threads` threads, keeping the commands.
 pub fn contour_demo(demo: Demo, n: usize, levels: &[f32], planes: &[Plane], threads: usize) -> Contoured {

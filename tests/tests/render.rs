@@ -3,13 +3,11 @@
 //! that a change in any stage (contouring, view, display list, ordering,
 //! beam, phosphor) shows. `ISOSCOPE_BLESS=1` rewrites the references.
 
-use isoscope_core::beam::BeamConfig;
 use isoscope_core::demo::Demo;
-use isoscope_core::grid::{Plane, Volume};
+use isoscope_core::grid::Plane;
 use isoscope_sim::phosphor::PhosphorConfig;
 use isoscope_sim::scene::{SceneConfig, build, render};
-use isoscope_sim::volume::{LoadedVolume, Samples};
-use isoscope_tests::{demo_samples, real_data};
+use isoscope_tests::{demo_wire, real_wire};
 use std::path::PathBuf;
 
 const SIZE: u32 = 256;
@@ -55,22 +53,19 @@ fn check(name: &str, png_bytes: &[u8]) {
 fn picture(scene: &isoscope_sim::scene::Scene) -> Vec<u8> {
     let mut cfg = PhosphorConfig::with_size(SIZE, SIZE);
     cfg.bits = 12;
-    render(scene, &BeamConfig::default(), cfg, 1, None).unwrap().encode_png()
+    render(scene, cfg, 1, None).unwrap().encode_png()
 }
 
 #[test]
 fn hydrogen_32_looks_as_it_did() {
-    let data = demo_samples(Demo::Hydrogen, 32);
-    let v = Volume::new(&data, 32, 32, 32).unwrap();
+    let v = demo_wire(Demo::Hydrogen, 32);
     let scene = build(&v, &SceneConfig { levels: vec![0.1], ..SceneConfig::default() }).unwrap();
     check("hydrogen32.png", &picture(&scene));
 }
 
 #[test]
 fn mri_head_looks_as_it_did() {
-    let v = LoadedVolume::read_known(&real_data("brainsmall.den")).unwrap().unwrap();
-    let Samples::U8(s) = &v.samples else { panic!("u8") };
-    let vol = Volume::new(s, 128, 128, 84).unwrap();
+    let vol = real_wire("brainsmall.den");
     // Skin level, every 6th axial (x-y) and sagittal (y-z) slice, seen from
     // above and to the side: a chicken-wire head.
     let mut cfg = SceneConfig {
@@ -89,8 +84,7 @@ fn mri_head_looks_as_it_did() {
 /// another view differs from the reference.
 #[test]
 fn a_different_picture_fails_the_comparison() {
-    let data = demo_samples(Demo::Hydrogen, 32);
-    let v = Volume::new(&data, 32, 32, 32).unwrap();
+    let v = demo_wire(Demo::Hydrogen, 32);
     let mut cfg = SceneConfig { levels: vec![0.1], ..SceneConfig::default() };
     cfg.view.yaw += 20.0;
     let other = picture(&build(&v, &cfg).unwrap());

@@ -357,6 +357,19 @@ impl<'g> Source<'g> {
         self.points[0].len() + self.points[1].len()
     }
 
+    /// The smallest box of codes holding every point (lowest, highest
+    /// corner); `None` with no points.
+    pub(crate) fn extent(&self) -> Option<[Packed; 2]> {
+        let mut codes = self.points.iter().flat_map(|p| p.iter()).map(unpack);
+        let first = codes.next()?;
+        Some(codes.fold([first, first], |[lo, hi], q| {
+            [
+                [lo[0].min(q[0]), lo[1].min(q[1]), lo[2].min(q[2])],
+                [hi[0].max(q[0]), hi[1].max(q[1]), hi[2].max(q[2])],
+            ]
+        }))
+    }
+
     /// The fixed point shift.
     pub(crate) fn shift(&self) -> u8 {
         self.shift

@@ -32,11 +32,13 @@
 //! Changing the levels needs the volume again (they apply to the next
 //! volume); changing the view or the beam does not.
 
+mod board;
 mod chain;
 mod geometry;
 mod session;
 mod stream;
 
+pub use board::{Board, Capacity};
 pub use chain::ChainStats;
 use chain::Pass;
 use geometry::Source;
@@ -46,7 +48,6 @@ pub use stream::VolumeSpec;
 
 use crate::beam::{BeamConfig, BeamConfigError, FrameStats, Scheduler, frame_stats};
 use crate::command::{Command, Point3};
-use crate::display::OptimizeConfig;
 use crate::screen::ScreenPoint;
 use crate::view::{Bounds, Projection, View, ViewError, ViewTransform};
 use crate::wire::{
@@ -168,9 +169,10 @@ pub struct EngineConfig {
     pub view: View,
     /// The beam until the host sets it.
     pub beam: BeamConfig,
-    /// Merging collinear runs: the tolerance in DAC units (for the largest
-    /// scale any view gives the volume); 0 merges nothing.
-    pub optimize: OptimizeConfig,
+    /// Merging collinear runs: the largest distance, in DAC units (at the
+    /// largest scale any view gives the picture), of a dropped vertex from
+    /// the chord that replaces it; 0 merges nothing. Default: half an LSB.
+    pub merge_tolerance: f32,
     /// A transfer with no accepted message for this long is abandoned (ms).
     pub transfer_timeout_ms: u32,
     /// Contour a completed slice later, a few rows at a time
@@ -191,7 +193,7 @@ impl Default for EngineConfig {
             sample_rate_hz: 1_000_000,
             view: View::DEFAULT,
             beam: BeamConfig::default(),
-            optimize: OptimizeConfig::default(),
+            merge_tolerance: 0.5,
             transfer_timeout_ms: 5_000,
             defer_contouring: false,
         }
@@ -388,6 +390,10 @@ struct Shown {
     dims: [u16; 3],
     spacing: [f32; 3],
     points: u32,
+    /// The box of the surface's points (voxel coordinates), which every
+    /// view fits by its bounding sphere; the volume's box until the
+    /// surface is known, or when it is empty.
+    bounds: Bounds,
 }
 
 /// Everything but the frame decoder and the two surfaces.
@@ -609,17 +615,26 @@ impl<'a> Engine<'a> {
     fn commit(&mut self) {
         let dev = &mut self.dev;
         dev.commit = false;
-        let Some(spec) = dev.shown else { return };
+        let Some(spec) = dev.shown.as_mut() else { return };
+        let (spill, free) = dev.stream.take_spill();
+        let pieces = Source::two(&self.back, &spill);
+        // Every view fits the surface, not the volume: the box of its
+        // pieces (stitching and merging keep their end points, so it is the
+        // picture's box too).
+        if let Some([lo, hi]) = pieces.extent() {
+            spec.bounds = Bounds::new(self.back.point(lo), self.back.point(hi));
+        }
+        let spec = *spec;
         // Merge within the tolerance at the largest scale a view can give:
         // the bounding sphere's fit, times the longest voxel side, doubled.
-        let tolerance = Bounds::of_volume(spec.dims[0].into(), spec.dims[1].into(), spec.dims[2].into())
-            .and_then(|b| {
-                ViewTransform::fit_sphere(&View { spacing: spec.spacing, bits: dev.beam.bits, ..dev.view }, b)
-            })
-            .map_or(0.0, |t| {
-                let side = spec.spacing.iter().fold(0.0f32, |m, &s| m.max(s));
-                dev.cfg.optimize.tolerance / (2.0 * t.scale() * side)
-            });
+        let tolerance = ViewTransform::fit_sphere(
+            &View { spacing: spec.spacing, bits: dev.beam.bits, ..dev.view },
+            spec.bounds,
+        )
+        .map_or(0.0, |t| {
+            let side = spec.spacing.iter().fold(0.0f32, |m, &s| m.max(s));
+            dev.cfg.merge_tolerance / (2.0 * t.scale() * side)
+        });
         // Stitch the pieces (the back's, then those that spilled into the
         // slice memory) into maximal polylines (into the front), then order
         // those for short jumps (back into the back), and make that the
@@ -629,8 +644,6 @@ impl<'a> Engine<'a> {
         // the stitch pass when the pieces are more than the front holds
         // (stitching joins them, merging thins them: the surface fits
         // again).
-        let (spill, free) = dev.stream.take_spill();
-        let pieces = Source::two(&self.back, &spill);
         let merge_first = pieces.len() > self.front.capacity();
         let (first, then) = if merge_first { (tolerance, 0.0) } else { (0.0, tolerance) };
         let scratch = if free.len() >= self.scratch.len() { free } else { &mut *self.scratch };
@@ -673,16 +686,10 @@ impl<'a> Engine<'a> {
         let elapsed_s = now_ms.wrapping_sub(dev.spin_epoch_ms) as f32 / 1000.0;
         let turn = libm::fmodf(dev.spin_deg_per_s * elapsed_s, 360.0);
         let view = View { spacing: shown.spacing, bits: dev.beam.bits, ..dev.view }.yawed(turn);
-        let [nx, ny, nz] = shown.dims.map(usize::from);
-        let fitted = Bounds::of_volume(nx, ny, nz).and_then(|b| {
-            // A spinning view fits its bounding sphere, so it does not breathe.
-            if dev.spin_deg_per_s != 0.0 {
-                ViewTransform::fit_sphere(&view, b)
-            } else {
-                ViewTransform::fit(&view, b)
-            }
-        });
-        if let Ok(t) = fitted {
+        // The surface's bounding sphere fills the screen: the scale is the
+        // same from every side, so a spinning view neither breathes nor
+        // clips, and turning the view keeps the picture's size.
+        if let Ok(t) = ViewTransform::fit_sphere(&view, shown.bounds) {
             self.transform = Some(t);
         }
     }
@@ -1044,7 +1051,10 @@ impl Device<'_> {
                     return Err(NackCode::Missing);
                 }
                 self.stream.transfer = None;
-                self.shown = Some(Shown { dims: t.spec.dims, spacing: t.spec.spacing, points: 0 });
+                let [nx, ny, nz] = t.spec.dims.map(usize::from);
+                let bounds = Bounds::of_volume(nx, ny, nz)
+                    .unwrap_or(Bounds::new(Point3::new(0.0, 0.0, 0.0), Point3::new(1.0, 1.0, 1.0)));
+                self.shown = Some(Shown { dims: t.spec.dims, spacing: t.spec.spacing, points: 0, bounds });
                 self.commit = true;
                 self.counters.volumes = self.counters.volumes.wrapping_add(1);
                 let spilled = self.stream.spilled();

@@ -18,7 +18,7 @@
 #![deny(clippy::panic, clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 
 use isoscope_core::demo::Demo;
-use isoscope_core::engine::{Engine, EngineConfig, Geometry};
+use isoscope_core::engine::{Board, Engine, EngineConfig, Geometry};
 use isoscope_core::wire::{
     AXIS_X, AXIS_Y, AXIS_Z, Levels, MAX_FRAME_LEN, Message, SampleType, WireError, encode,
 };
@@ -28,6 +28,10 @@ pub const DEMO: Demo = Demo::Hydrogen;
 /// Its side, in samples (`SIDE`^3 voxels).
 pub const SIDE: usize = 12;
 
+/// The board as the core names it ([`Board::F407`]): its capacities and
+/// sample clock, which the host simulator's `--board f407` applies too.
+pub const BOARD: Board = Board::F407;
+
 /// Bytes of the largest z slice the board takes (`nx * ny * sample size`):
 /// 128x128 `u8`, `u16` or `i16`, or 90x90 `f32` (`nx` and `ny` at most
 /// [`EXTENT`]). What a volume's two slices leave free holds the pieces of
@@ -35,9 +39,9 @@ pub const SIDE: usize = 12;
 /// 32x32 `f32` slices: 4,624 of its 12,816); between volumes the slice
 /// buffers are the scratch for stitching and ordering the surface (about
 /// 7 bytes a point): 64 KB order all [`POINTS`].
-pub const SLICE_BYTES: usize = 32 * 1024;
+pub const SLICE_BYTES: usize = BOARD.capacity.slice_bytes;
 /// The largest `nx` or `ny`.
-pub const EXTENT: usize = 128;
+pub const EXTENT: usize = BOARD.capacity.extent;
 /// Points each of the two surfaces holds (6 bytes each, and 2 bits of
 /// kind): the limit on picture complexity. A volume's pieces as contoured
 /// are about 1.75 times its picture's points (stitching joins them at
@@ -45,7 +49,7 @@ pub const EXTENT: usize = 128;
 /// fit the received surface spill into the slice memory its slices leave
 /// free. Both surfaces take 102,400 bytes of SRAM. The boot scene has 936
 /// (after stitching).
-pub const POINTS: usize = 8192;
+pub const POINTS: usize = BOARD.capacity.points;
 /// Bytes of each surface: [`POINTS`] points of 6 bytes and their kinds
 /// (2 bits each).
 pub const SURFACE_BYTES: usize = Geometry::bytes_for(POINTS);
@@ -55,7 +59,7 @@ pub const SURFACE_BYTES: usize = Geometry::bytes_for(POINTS);
 pub const QEMU_FRAMES: usize = 2;
 
 /// DAC samples per second (both channels and the blank pin).
-pub const SAMPLE_RATE_HZ: u32 = 1_000_000;
+pub const SAMPLE_RATE_HZ: u32 = BOARD.sample_rate_hz;
 
 /// The slowest sample rate the board's pacer ([`isoscope_core::pace`])
 /// may choose for a picture whose refill cannot keep up with
@@ -74,12 +78,7 @@ pub const FIRMWARE_VERSION: [u8; 3] = [0, 1, 0];
 /// device`) uses the same defaults but contours at once, which gives the
 /// same surface: both draw the same samples for the same volume.
 pub fn engine_config() -> EngineConfig {
-    EngineConfig {
-        firmware: FIRMWARE_VERSION,
-        sample_rate_hz: SAMPLE_RATE_HZ,
-        defer_contouring: true,
-        ..EngineConfig::default()
-    }
+    EngineConfig { firmware: FIRMWARE_VERSION, defer_contouring: true, ..BOARD.engine_config() }
 }
 
 /// Feed all of `bytes` to `engine`, doing any contouring it defers on the

@@ -1,0 +1,259 @@
+//! The board's engine on the host: its memory on the heap
+//! ([`HostBuffers`]), and a board in process ([`InProcess`]) that is fed the
+//! very frames `send` puts on the wire ([`crate::link::volume_messages`]),
+//! through the engine's own decoder, session, streaming contourer, stitch
+//! and order passes. Every host command that draws a picture (`render`,
+//! `stats`, `wav`, `contour --format svg`, `render --animate`) draws it
+//! this way, so its samples are the board's.
+
+use crate::link::{SendConfig, WireVolume, volume_messages};
+use crate::progress::Progress;
+use anyhow::{Context, Result, anyhow, bail};
+use isoscope_core::engine::{Buffers, Capacity, Engine, EngineConfig, Event, Geometry};
+use isoscope_core::view::View;
+use isoscope_core::wire::{Levels, MAX_FRAME_LEN, MAX_LEVELS, Message, NackCode, PROTOCOL_VERSION, encode};
+
+/// The engine's memory on the heap.
+#[derive(Debug, Clone)]
+pub struct HostBuffers {
+    slices: Vec<u8>,
+    rows: Vec<f32>,
+    surfaces: Vec<u8>,
+    scratch: Vec<u8>,
+}
+
+impl HostBuffers {
+    /// Memory of `capacity`.
+    pub fn new(capacity: &Capacity) -> Self {
+        Self {
+            slices: vec![0; 2 * capacity.slice_bytes],
+            rows: vec![0.0; 2 * capacity.extent],
+            surfaces: vec![0; 2 * Geometry::bytes_for(capacity.points)],
+            scratch: vec![0; capacity.scratch_bytes],
+        }
+    }
+
+    /// The buffers, lent to an engine.
+    pub fn buffers(&mut self) -> Buffers<'_> {
+        Buffers::halves(&mut self.slices, &mut self.rows, &mut self.surfaces, &mut self.scratch)
+    }
+}
+
+/// Room on the host for `points` points a surface, with the scratch to
+/// stitch and order them all (8 bytes a point), for slices of `slice_bytes`
+/// and rows of `extent`.
+pub fn host_capacity(slice_bytes: usize, extent: usize, points: usize) -> Capacity {
+    Capacity { slice_bytes, extent, points, scratch_bytes: 8 * points }
+}
+
+/// What the board did with the last volume, from its events.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Loaded {
+    /// Contour commands kept (in the received surface and the slice memory).
+    pub commands: u32,
+    /// Contour commands with no room (the picture lacks them).
+    pub dropped: u32,
+    /// Subgrids skipped for NaN or infinite samples.
+    pub nonfinite_cells: u32,
+    /// Points of the stitched picture.
+    pub points: u32,
+    /// Points the picture had no room for (it is cut short).
+    pub cut: u32,
+    /// False when there was too little scratch to stitch and order.
+    pub ordered: bool,
+    /// Seconds: the transfer (decoding and contouring, slice by slice), and
+    /// the commit (stitch, order, count a frame).
+    pub seconds: [f64; 2],
+}
+
+impl Loaded {
+    /// Whether the whole surface is drawn, stitched and ordered.
+    pub fn whole(&self) -> bool {
+        self.dropped == 0 && self.cut == 0 && self.ordered
+    }
+}
+
+/// A board in process: the engine, fed messages as frames.
+#[derive(Debug)]
+pub struct InProcess<'a> {
+    engine: Engine<'a>,
+    /// The next command's sequence number.
+    seq: u16,
+    now_ms: u32,
+    loaded: Loaded,
+    frame: Vec<u8>,
+}
+
+impl<'a> InProcess<'a> {
+    /// A board over `mem` with `cfg`, greeted (`Hello`), showing nothing.
+    ///
+    /// # Errors
+    /// Invalid settings or buffers.
+    pub fn new(mem: &'a mut HostBuffers, cfg: EngineConfig) -> Result<Self> {
+        let engine = Engine::new(cfg, mem.buffers()).context("cannot start the engine")?;
+        let mut board =
+            Self { engine, seq: 0, now_ms: 0, loaded: Loaded::default(), frame: vec![0; MAX_FRAME_LEN] };
+        board.feed(&Message::Hello { protocol: PROTOCOL_VERSION, firmware: [0; 3] })?;
+        Ok(board)
+    }
+
+    /// The engine.
+    pub fn engine(&self) -> &Engine<'a> {
+        &self.engine
+    }
+
+    /// What the last volume came to.
+    pub fn loaded(&self) -> Loaded {
+        self.loaded
+    }
+
+    /// Encode `msg` and feed it to the engine as the UART would, doing the
+    /// contouring it defers; its answers are dropped, its events read.
+    ///
+    /// # Errors
+    /// The board refused the command (a `Nack`).
+    fn feed(&mut self, msg: &Message<'_>) -> Result<()> {
+        let mut rest = encode(msg, &mut self.frame).map_err(|e| anyhow!("cannot encode {msg:?}: {e}"))?;
+        loop {
+            let (mut link, _) = self.engine.split();
+            while link.contour(usize::MAX) {}
+            if rest.is_empty() {
+                break;
+            }
+            let n = link.feed(rest, self.now_ms);
+            rest = rest.get(n..).unwrap_or_default();
+        }
+        let mut sink = [0u8; 256];
+        while self.engine.transmit(&mut sink) > 0 {}
+        self.events()
+    }
+
+    /// Read the engine's events into `loaded`; the first refusal is an
+    /// error.
+    fn events(&mut self) -> Result<()> {
+        let mut refused = None;
+        while let Some(ev) = self.engine.next_event() {
+            match ev {
+                Event::Committed { commands, dropped, nonfinite_cells, .. } => {
+                    self.loaded = Loaded { commands, dropped, nonfinite_cells, ..Loaded::default() };
+                }
+                Event::Stitched { points, cut, ordered, .. } => {
+                    self.loaded = Loaded { points, cut, ordered, ..self.loaded };
+                }
+                Event::Nacked { code, .. } => {
+                    refused.get_or_insert(code);
+                }
+                _ => {}
+            }
+        }
+        match refused {
+            None => Ok(()),
+            Some(code) => Err(anyhow!("the board refused it: {}", refusal(code))),
+        }
+    }
+
+    /// Put `vol` on the board as `send` would with `cfg` (its levels, axes,
+    /// stride, chunk and view), and make it the picture; `progress` counts
+    /// the frames fed ([`frames_for`]).
+    ///
+    /// # Errors
+    /// More than [`MAX_LEVELS`] levels, or the board refuses the volume
+    /// (a slice larger than it holds, invalid levels or view).
+    pub fn load(
+        &mut self,
+        vol: &WireVolume,
+        cfg: &SendConfig,
+        progress: Option<&Progress>,
+    ) -> Result<Loaded> {
+        let levels = Levels::from_slice(&cfg.levels)
+            .with_context(|| format!("at most {MAX_LEVELS} levels go to the board"))?;
+        let t0 = std::time::Instant::now();
+        for msg in volume_messages(vol, cfg, levels, self.seq) {
+            self.seq = msg_seq(&msg).wrapping_add(1);
+            self.feed(&msg)?;
+            if let Some(p) = progress {
+                p.inc();
+            }
+        }
+        let t1 = std::time::Instant::now();
+        self.engine.update(self.now_ms);
+        self.loaded.seconds = [(t1 - t0).as_secs_f64(), t1.elapsed().as_secs_f64()];
+        self.events()?;
+        Ok(self.loaded)
+    }
+
+    /// Set the view's angles and projection, as `send --yaw ...` does
+    /// (`SetView`), and redraw.
+    ///
+    /// # Errors
+    /// The board refuses the view.
+    pub fn set_view(&mut self, view: &View) -> Result<()> {
+        let fov_deg = match view.projection {
+            isoscope_core::view::Projection::Orthographic => 0.0,
+            isoscope_core::view::Projection::Perspective { fov_deg } => fov_deg,
+        };
+        let msg = Message::SetView {
+            seq: self.seq,
+            yaw: view.yaw,
+            pitch: view.pitch,
+            roll: view.roll,
+            fov_deg,
+            spin_deg_per_s: 0.0,
+        };
+        self.seq = self.seq.wrapping_add(1);
+        self.feed(&msg)?;
+        self.engine.update(self.now_ms);
+        self.events()
+    }
+}
+
+/// Frames [`InProcess::load`] feeds for `vol` with `cfg`.
+pub fn frames_for(vol: &WireVolume, cfg: &SendConfig) -> usize {
+    volume_messages(vol, cfg, Levels::new(), 0).count()
+}
+
+/// A command's sequence number.
+fn msg_seq(msg: &Message<'_>) -> u16 {
+    match *msg {
+        Message::BeginVolume { seq, .. }
+        | Message::SliceData { seq, .. }
+        | Message::EndVolume { seq }
+        | Message::SetLevels { seq, .. }
+        | Message::SetView { seq, .. }
+        | Message::SetBeam { seq, .. }
+        | Message::Ack { seq }
+        | Message::Nack { seq, .. }
+        | Message::Status { seq, .. } => seq,
+        Message::Hello { .. } | Message::Capabilities { .. } => 0,
+    }
+}
+
+/// What a refusal means, in a user's words.
+pub fn refusal(code: NackCode) -> &'static str {
+    match code {
+        NackCode::DimsOverCapacity => "the volume's slices are larger than the board holds",
+        NackCode::Invalid => "invalid settings (levels, planes, stride, spacing or view)",
+        NackCode::Busy => "busy with the last volume",
+        NackCode::Missing => "slices were missing at the end",
+        NackCode::Aborted => "the transfer was abandoned",
+        NackCode::BadCrc | NackCode::Truncated | NackCode::Oversize | NackCode::UnknownMessage => {
+            "a damaged frame"
+        }
+        NackCode::BadVersion => "another protocol version",
+        NackCode::OutOfOrder | NackCode::Duplicate => "a command out of sequence",
+    }
+}
+
+/// Check `levels` against what one volume on a board takes.
+///
+/// # Errors
+/// None, or more than [`MAX_LEVELS`].
+pub fn check_levels(levels: &[f32]) -> Result<()> {
+    if levels.is_empty() {
+        bail!("no contour level");
+    }
+    if levels.len() > MAX_LEVELS {
+        bail!("{} levels given; a board draws at most {MAX_LEVELS} at once", levels.len());
+    }
+    Ok(())
+}
