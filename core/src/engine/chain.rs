@@ -10,16 +10,23 @@
 //!    ends meet) first, then around closed loops, going on only through a
 //!    fragment that starts exactly where the walk stands (crossings on
 //!    shared edges are bit-identical), the straightest one first.
-//! 2. [`Pass::Order`]: from where the beam stands, the nearest polyline end
-//!    (or, for a closed loop, the nearest of its vertices: a loop is entered
-//!    anywhere) is drawn next.
+//! 2. [`Pass::Order`]: the loops that cross a polyline at one of its
+//!    points are drawn inside it there (round and back: no jump to them
+//!    or from them), so a chicken-wire surface, loops of three planes
+//!    crossing at shared points, becomes one polyline a connected piece;
+//!    the polylines that start a chain are toured: nearest neighbour (in
+//!    space, on a grid of cells), then 2-opt and or-opt by a [`Metric`]
+//!    (in space, or on the screen of the view in force, where a jump across
+//!    the depth costs nothing), each loop entered at its best vertex.
 //!
 //! Either pass merges runs of nearly collinear points on the way, as told
 //! (the engine merges in one of them: see `Engine::commit`).
 //!
-//! The order is made in voxel space, once per volume: any view then draws it
-//! with no more blanked travel than the 3D tour, scaled (a projection never
-//! lengthens a jump), so a new or spinning view needs no re-ordering.
+//! The order is made once per volume: a new or spinning view needs no
+//! re-ordering. Made in space, any view draws it with no more blanked
+//! travel than the 3D tour, scaled (a projection never lengthens a jump);
+//! made on one view's screen, that view draws it shortest and the others
+//! draw the same tour.
 //!
 //! Memory, in caller scratch (the engine lends the slice buffers, idle
 //! between volumes): the fragment starts and a grid of ends (a singly
@@ -35,7 +42,9 @@
 //! end left (a cursor that only moves on, `O(cells)` in all).
 
 use super::geometry::{Geometry, Kind, Packed, Source};
+use crate::command::Point3;
 use crate::fastmath::sqrt;
+use crate::view::ViewTransform;
 
 /// No entry.
 const NONE: u32 = u32::MAX;
@@ -48,6 +57,9 @@ const RINGS: i32 = 8;
 const WINDOW: usize = 48;
 /// Dropped points remembered to check a merged chord against.
 const MERGE_SPAN: usize = 8;
+/// Closed loops drawn inside one another at most ([`Walk::emit_spliced`]):
+/// a frame each on the stack, 24 bytes.
+const SPLICE_DEPTH: usize = 16;
 
 /// What stitching and ordering (`chain`) did.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -76,15 +88,18 @@ pub struct ChainStats {
     pub ordered: bool,
     /// Points the output had no room for: the picture is cut short.
     pub cut: u32,
+    /// Closed loops drawn inside another polyline where they cross it, no
+    /// jump to them or from them.
+    pub spliced: u32,
 }
 
 /// How [`chain`] picks the next fragment.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) enum Pass {
     /// Cull, then walk maximal polylines.
     Stitch,
-    /// Short jumps, merging collinear runs.
-    Order,
+    /// Short jumps by the metric, merging collinear runs.
+    Order(Metric),
 }
 
 /// The index's words over a byte buffer (the scratch is lent as bytes):
@@ -100,6 +115,17 @@ enum Words<'s> {
 /// Points (and ends) below which the stitch pass may keep its index in
 /// `u16`s: the top bit is [`DRAWN`], all ones [`NONE`].
 const NARROW_LIMIT: usize = 0x7FFF;
+
+/// Bytes of scratch the stitch pass wants for `frags` fragments of
+/// `points` points in all: its index in `u16` words where those fit (fewer
+/// than [`NARROW_LIMIT`] points and ends), a start and two end links a
+/// fragment and a list head for every four ends, so that a lookup walks a
+/// few ends. With less it still stitches (fewer lists, longer walks) down
+/// to three words a fragment, and below that copies the pieces unordered.
+pub(crate) const fn stitch_reserve(frags: usize, points: usize) -> usize {
+    let word = if points < NARROW_LIMIT && 2 * frags < NARROW_LIMIT { 2 } else { 4 };
+    word * (3 * frags + frags / 2 + 1)
+}
 
 impl<'s> Words<'s> {
     fn wide(bytes: &'s mut [u8]) -> Self {
@@ -185,6 +211,67 @@ fn dist2f(a: Packed, b: Packed) -> f32 {
 #[inline]
 fn length(a: Packed, b: Packed) -> f32 {
     sqrt(dist2f(a, b))
+}
+
+/// How the order pass measures a jump when it improves its tour.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Metric {
+    /// In voxel space (codes): any view then draws the tour with jumps no
+    /// longer than these, scaled. For a spinning view.
+    Space,
+    /// On one view's screen (DAC units): the tour that view draws with the
+    /// least blanked travel (a jump across the depth costs nothing there).
+    /// Other views draw the same tour.
+    Screen {
+        /// The view.
+        view: ViewTransform,
+        /// The codes' fixed point shift.
+        shift: u8,
+        /// Where the beam starts, on the screen.
+        park: [f32; 2],
+    },
+}
+
+impl Metric {
+    /// `q` on the screen (a point the view cannot project is far away).
+    fn at(view: &ViewTransform, shift: u8, q: Packed) -> [f32; 2] {
+        let k = f32::from_bits((127 - u32::from(shift.min(12))) << 23);
+        let s = view.project_raw(Point3::new(f32::from(q[0]) * k, f32::from(q[1]) * k, f32::from(q[2]) * k));
+        if s.x.is_finite() && s.y.is_finite() { [s.x, s.y] } else { [1e9, 1e9] }
+    }
+
+    /// The squared length of the jump from `a` to `b`.
+    fn d2(&self, a: Packed, b: Packed) -> f32 {
+        match self {
+            Self::Space => dist2f(a, b),
+            Self::Screen { view, shift, .. } => {
+                let (p, q) = (Self::at(view, *shift, a), Self::at(view, *shift, b));
+                let (dx, dy) = (p[0] - q[0], p[1] - q[1]);
+                dx * dx + dy * dy
+            }
+        }
+    }
+
+    /// The length of the jump from `a` to `b`.
+    fn d(&self, a: Packed, b: Packed) -> f32 {
+        match self {
+            Self::Space => length(a, b),
+            Self::Screen { .. } => sqrt(self.d2(a, b)),
+        }
+    }
+
+    /// The length of the jump from where the beam starts (`start` in
+    /// space) to `b`.
+    fn first_jump(&self, start: Packed, b: Packed) -> f32 {
+        match self {
+            Self::Space => length(start, b),
+            Self::Screen { view, shift, park } => {
+                let q = Self::at(view, *shift, b);
+                let (dx, dy) = (park[0] - q[0], park[1] - q[1]);
+                sqrt(dx * dx + dy * dy)
+            }
+        }
+    }
 }
 
 /// 64 well-mixed bits of a point (for [`Index::odd`]).
@@ -507,6 +594,40 @@ impl<'s, 'g> Index<'s, 'g> {
         }
     }
 
+    /// The order pass, once its tour is made: no point drawn, and every end
+    /// (every vertex of a loop) back in its cell's list (the searches took
+    /// the drawn ones out), for the splices of [`Walk::emit_spliced`].
+    fn relink(&mut self) {
+        for c in 0..self.cells() {
+            self.w.set(self.heads + c, NONE);
+        }
+        for d in self.dead..self.dead + self.src.len().div_ceil(32) {
+            self.w.set(d, 0);
+        }
+        for f in 0..self.frags {
+            self.each_slot(f, |x, s| x.link(s));
+        }
+    }
+
+    /// The order pass: whether fragment `f`'s points are drawn.
+    fn emitted(&self, f: usize) -> bool {
+        self.dead(self.span(f).0)
+    }
+
+    /// The order pass: a vertex exactly at `q` of a closed loop not drawn
+    /// yet.
+    fn loop_at(&self, q: Packed) -> Option<usize> {
+        let mut found = None;
+        self.each_end(self.cell(q), |s| {
+            if self.point(s) == q && self.is_loop(self.frag_of(s)) {
+                found = Some(s);
+                return false;
+            }
+            true
+        });
+        found
+    }
+
     /// Mark fragment `f` drawn. Its ends stay in their lists, passed over
     /// as drawn (in the stitch pass a list is the ends at a point or two;
     /// in the order pass a loop has an end a vertex, and finding each one's
@@ -754,7 +875,7 @@ fn chain_on(
 ) -> ChainStats {
     dst.reset(src.shift());
     let mut stats = ChainStats { points_in: src.len() as u32, ..ChainStats::default() };
-    let Some(mut x) = Index::build(src, scratch, pass == Pass::Order, hashed && pass == Pass::Stitch) else {
+    let Some(mut x) = Index::build(src, scratch, pass != Pass::Stitch, hashed && pass == Pass::Stitch) else {
         copy(src, dst, &mut stats);
         return stats;
     };
@@ -762,10 +883,11 @@ fn chain_on(
     stats.ordered = true;
     let mut walk = Walk { out: Out::new(tolerance, src.shift()), cur: start, prev: None };
     match pass {
-        Pass::Order => {
+        Pass::Order(metric) => {
             // The tour: nearest neighbour, then 2-opt, then each loop entered
             // at its best vertex; drawn last.
-            let mut tour = Tour { base: x.tour_base(), len: 0 };
+            mark_spliced(&mut x);
+            let mut tour = Tour { base: x.tour_base(), len: 0, metric };
             let mut scan = 0;
             let mut cur = start;
             for _ in 0..x.frags {
@@ -775,12 +897,25 @@ fn chain_on(
                 tour.push(&mut x, f, end);
                 cur = x.point(exit(&x, f, end));
             }
-            tour.two_opt(&mut x);
-            tour.best_entries(&mut x, start);
+            tour.improve(&mut x, start);
+            // Drawn in the tour's order; a loop that passes exactly
+            // through a point being drawn is drawn there, and the beam goes
+            // on from where it came back (no jump to it, none from it).
+            x.relink();
             for k in 0..tour.len {
                 let (end, _) = tour.get(&x.w, k);
                 let f = x.frag_of(end);
-                walk.emit(&x, dst, f, end, &mut stats);
+                if !x.emitted(f) {
+                    walk.emit_spliced(&mut x, dst, f, end, &mut stats);
+                }
+            }
+            // A loop the tour left to a splice that this drawing order
+            // reached too deep (or not at all): drawn after the tour.
+            for f in 0..x.frags {
+                if !x.emitted(f) {
+                    let end = x.span(f).0;
+                    walk.emit_spliced(&mut x, dst, f, end, &mut stats);
+                }
             }
         }
         Pass::Stitch => {
@@ -859,7 +994,14 @@ fn exit(x: &Index<'_, '_>, f: usize, end: usize) -> usize {
 struct Tour {
     base: usize,
     len: usize,
+    metric: Metric,
 }
+
+/// Jumps the order pass's local search measures at most, all moves of
+/// all passes: some 60 instructions each on the MCU, 1M is about 0.4 s at
+/// 168 MHz, spent only on pictures of over a thousand polylines (a full
+/// search of `n` polylines costs about `n^2` a pass).
+const SEARCH_BUDGET: u64 = 1 << 20;
 
 /// Words a tour step takes.
 const TOUR_WORDS: usize = 3;
@@ -899,8 +1041,112 @@ impl Tour {
 
     /// Measure the jump from step `k` to step `k + 1`.
     fn measure(&self, x: &mut Index<'_, '_>, k: usize) {
-        let jump = length(self.ends(x, k).1, self.ends(x, k + 1).0);
+        let jump = self.metric.d(self.ends(x, k).1, self.ends(x, k + 1).0);
         self.set_jump(&mut x.w, k, jump);
+    }
+
+    /// Improve the nearest-neighbour tour: 2-opt and or-opt in turn while
+    /// either finds a move (and the budget lasts), then each loop entered
+    /// at its best vertex.
+    fn improve(&self, x: &mut Index<'_, '_>, start: Packed) {
+        let n = self.len as u64;
+        // Steps a 2-opt move reverses, and positions an or-opt move tries:
+        // all of them while a pass costs no more than an eighth of the
+        // budget, else as many as keep it so (at least WINDOW).
+        let window = ((SEARCH_BUDGET / 8) / n.max(1)).max(WINDOW as u64).min(n) as usize;
+        let mut budget = SEARCH_BUDGET;
+        for _ in 0..8 {
+            let a = self.two_opt(x, window, &mut budget);
+            let b = self.or_opt(x, window, &mut budget);
+            if !(a || b) || budget == 0 {
+                break;
+            }
+        }
+        self.best_entries(x, start);
+    }
+
+    /// Or-opt: take one step out and put it back, either way round, where
+    /// that shortens the tour most, among the `window` positions on either
+    /// side; a pass over every step. Returns whether it moved one.
+    fn or_opt(&self, x: &mut Index<'_, '_>, window: usize, budget: &mut u64) -> bool {
+        let n = self.len;
+        if n < 4 {
+            return false;
+        }
+        let m = self.metric;
+        let mut moved = false;
+        for i in 1..n {
+            if *budget == 0 {
+                break;
+            }
+            let (e, o) = self.ends(x, i);
+            let prev = self.ends(x, i - 1).1;
+            let next = (i + 1 < n).then(|| self.ends(x, i + 1).0);
+            let gain = self.jump(&x.w, i - 1) + if i + 1 < n { self.jump(&x.w, i) } else { 0.0 }
+                - next.map_or(0.0, |nx| m.d(prev, nx));
+            if gain <= 1e-3 {
+                continue;
+            }
+            // Between steps k and k + 1 (k + 1 == n: after the last).
+            let mut best: Option<(f32, usize, bool)> = None;
+            let lo = i.saturating_sub(window).max(1) - 1;
+            let hi = (i + window).min(n - 1);
+            for k in lo..=hi {
+                if k == i || k + 1 == i {
+                    continue;
+                }
+                *budget = budget.saturating_sub(1);
+                let a = self.ends(x, k).1;
+                let b = (k + 1 < n).then(|| self.ends(x, k + 1).0);
+                let old = if k + 1 < n { self.jump(&x.w, k) } else { 0.0 };
+                for flip in [false, true] {
+                    let (ie, io) = if flip { (o, e) } else { (e, o) };
+                    // The first new jump alone no shorter than the gain, less
+                    // what the old jump gives back: no better (no root).
+                    let bound = gain + old;
+                    if m.d2(a, ie) * 0.999_99 >= bound * bound {
+                        continue;
+                    }
+                    let add = m.d(a, ie) + b.map_or(0.0, |b| m.d(io, b)) - old;
+                    if add + 1e-3 < gain && best.is_none_or(|(c, ..)| add < c) {
+                        best = Some((add, k, flip));
+                    }
+                }
+            }
+            if let Some((_, k, flip)) = best {
+                self.relocate(x, i, k, flip);
+                moved = true;
+            }
+        }
+        moved
+    }
+
+    /// Move step `i` to just after step `k` (`k` counted before the move),
+    /// drawn the other way if `flip`, and measure the jumps again.
+    fn relocate(&self, x: &mut Index<'_, '_>, i: usize, k: usize, flip: bool) {
+        let (e, o) = self.get(&x.w, i);
+        let (e, o) = if flip { (o, e) } else { (e, o) };
+        let dest = if k < i {
+            for j in (k + 1..i).rev() {
+                let (a, b) = self.get(&x.w, j);
+                self.set(&mut x.w, j + 1, a, b);
+            }
+            k + 1
+        } else {
+            for j in i..k {
+                let (a, b) = self.get(&x.w, j + 1);
+                self.set(&mut x.w, j, a, b);
+            }
+            k
+        };
+        self.set(&mut x.w, dest, e, o);
+        let (lo, hi) = (i.min(dest).saturating_sub(1), i.max(dest).min(self.len - 1));
+        for j in lo..hi.min(self.len - 1) {
+            self.measure(x, j);
+        }
+        if hi + 1 < self.len {
+            self.measure(x, hi);
+        }
     }
 
     /// 2-opt: reverse a run of up to [`WINDOW`] steps (each drawn the other
@@ -912,19 +1158,19 @@ impl Tour {
     /// shorter than the two old ones is turned down without a square root:
     /// the same moves as measuring every jump afresh, at a fraction of the
     /// cost.
-    fn two_opt(&self, x: &mut Index<'_, '_>) {
+    fn two_opt(&self, x: &mut Index<'_, '_>, window: usize, budget: &mut u64) -> bool {
         let n = self.len;
         if n < 3 {
-            return;
+            return false;
         }
         for k in 0..n - 1 {
             self.measure(x, k);
         }
-        // Bounded work: 8 passes of WINDOW moves a step.
-        let mut budget: u64 = 8 * WINDOW as u64 * n as u64;
+        let m = self.metric;
         let mut improved = true;
+        let mut any = false;
         let mut passes = 0;
-        while improved && budget > 0 && passes < 8 {
+        while improved && *budget > 0 && passes < 8 {
             passes += 1;
             improved = false;
             for i in 0..n - 1 {
@@ -933,17 +1179,17 @@ impl Tour {
                 let out_i = self.ends(x, i).1;
                 let in_i1 = self.ends(x, i + 1).0;
                 let before = self.jump(&x.w, i);
-                for j in i + 2..n.min(i + 2 + WINDOW) {
-                    budget = budget.saturating_sub(1);
+                for j in i + 2..n.min(i + 2 + window) {
+                    *budget = budget.saturating_sub(1);
                     let out_j = self.ends(x, j).1;
                     let old = before + if j + 1 < n { self.jump(&x.w, j) } else { 0.0 };
                     // `length` is within 1e-6 of the true root: a first new
                     // jump this long is no shorter than `old`, nor is `new`.
-                    if dist2f(out_i, out_j) * 0.999_99 >= old * old {
+                    if m.d2(out_i, out_j) * 0.999_99 >= old * old {
                         continue;
                     }
                     let after = if j + 1 < n { Some(self.ends(x, j + 1).0) } else { None };
-                    let new = length(out_i, out_j) + after.map_or(0.0, |a| length(in_i1, a));
+                    let new = m.d(out_i, out_j) + after.map_or(0.0, |a| m.d(in_i1, a));
                     if new + 1e-3 < old {
                         self.reverse(x, i + 1, j);
                         self.measure(x, i);
@@ -951,14 +1197,16 @@ impl Tour {
                             self.measure(x, j);
                         }
                         improved = true;
+                        any = true;
                         break;
                     }
                 }
-                if budget == 0 {
+                if *budget == 0 {
                     break;
                 }
             }
         }
+        any
     }
 
     /// Reverse steps `a..=b`, each drawn the other way (entry and exit
@@ -989,13 +1237,15 @@ impl Tour {
 
     /// Enter each closed loop at the vertex nearest the jumps around it.
     fn best_entries(&self, x: &mut Index<'_, '_>, start: Packed) {
-        let mut prev = start;
+        let m = self.metric;
+        let mut prev: Option<Packed> = None;
         for k in 0..self.len {
             let (end, _) = self.get(&x.w, k);
             let f = x.frag_of(end);
             if x.is_loop(f) {
                 let next = if k + 1 < self.len { Some(self.ends(x, k + 1).0) } else { None };
-                let cost = |v: Packed| length(prev, v) + next.map_or(0.0, |n| length(v, n));
+                let into = |v: Packed| prev.map_or_else(|| m.first_jump(start, v), |p| m.d(p, v));
+                let cost = |v: Packed| into(v) + next.map_or(0.0, |n| m.d(v, n));
                 let (from, to) = x.span(f);
                 let mut best = (cost(x.point(end)), end);
                 for i in from..to {
@@ -1003,8 +1253,8 @@ impl Tour {
                     // Either jump alone surely as long as the best (as in
                     // `two_opt`): no shorter, without a square root.
                     let bound = best.0 * best.0;
-                    if dist2f(prev, v) * 0.999_99 >= bound
-                        || next.is_some_and(|n| dist2f(v, n) * 0.999_99 >= bound)
+                    if prev.is_some_and(|p| m.d2(p, v) * 0.999_99 >= bound)
+                        || next.is_some_and(|n| m.d2(v, n) * 0.999_99 >= bound)
                     {
                         continue;
                     }
@@ -1015,7 +1265,7 @@ impl Tour {
                 }
                 self.set(&mut x.w, k, best.1, best.1);
             }
-            prev = self.ends(x, k).1;
+            prev = Some(self.ends(x, k).1);
         }
     }
 }
@@ -1045,16 +1295,40 @@ impl Walk {
         self.draw(x, dst, f, end, join, stats);
     }
 
-    /// Draw fragment `f` (already taken) entering at `end`.
-    fn emit(
+    /// The order pass: draw fragment `f` entering at `end`, and at each
+    /// point it passes, any closed loop not drawn yet that passes exactly
+    /// there (entered and left at that point, so the beam goes on where it
+    /// left off), and within that loop the same, up to [`SPLICE_DEPTH`]
+    /// loops deep. A chicken-wire surface is loops crossing at shared
+    /// points: so it is drawn in a few long polylines, one a connected
+    /// piece, instead of a loop a slice and a jump between each two.
+    fn emit_spliced(
         &mut self,
-        x: &Index<'_, '_>,
+        x: &mut Index<'_, '_>,
         dst: &mut Geometry<'_>,
         f: usize,
         end: usize,
         stats: &mut ChainStats,
     ) {
-        self.draw(x, dst, f, end, false, stats);
+        let (from, to) = x.span(f);
+        x.kill(from, to);
+        if x.is_dot(f) {
+            self.draw(x, dst, f, end, false, stats);
+            return;
+        }
+        let first = x.point(end);
+        if first != self.cur || !self.out.open {
+            self.out.finish(dst, stats);
+            stats.travel += length(first, self.cur) / f32::from(1u16 << x.src.shift());
+        }
+        let spliced = splice_walk(x, f, end, false, |q| {
+            self.out.point(dst, q, false, stats);
+            if self.cur != q {
+                self.prev = Some(self.cur);
+                self.cur = q;
+            }
+        });
+        stats.spliced += spliced;
     }
 
     fn draw(
@@ -1089,6 +1363,106 @@ impl Walk {
             (from..to).rev().for_each(&mut emit);
         } else {
             (from..to).for_each(&mut emit);
+        }
+    }
+}
+
+/// Walk fragment `f` from its point `end` as [`Walk::emit_spliced`] draws
+/// it: `visit` each point in drawing order, with every closed loop not yet
+/// drawn that passes exactly through one of them drawn there, round and
+/// back (up to [`SPLICE_DEPTH`] deep). Marks the points drawn, and (`mark`)
+/// the loops drawn inside ([`DRAWN`]). Returns how many were.
+fn splice_walk(
+    x: &mut Index<'_, '_>,
+    f: usize,
+    end: usize,
+    mark: bool,
+    mut visit: impl FnMut(Packed),
+) -> u32 {
+    let (from, to) = x.span(f);
+    x.kill(from, to);
+    let mut stack = [Splice::default(); SPLICE_DEPTH];
+    stack[0] = Splice { f, entry: end, done: 0 };
+    let mut depth: usize = 1;
+    let mut spliced = 0;
+    while let Some(top) = depth.checked_sub(1).and_then(|d| stack.get_mut(d)) {
+        let Some(i) = top.vertex(x) else {
+            depth -= 1;
+            continue;
+        };
+        top.done += 1;
+        let q = x.point(i);
+        visit(q);
+        if depth < SPLICE_DEPTH
+            && let Some(s) = x.loop_at(q)
+            && let Some(slot) = stack.get_mut(depth)
+        {
+            let g = x.frag_of(s);
+            let (gf, gt) = x.span(g);
+            x.kill(gf, gt);
+            if mark {
+                let w = x.w.get(g);
+                x.w.set(g, w | DRAWN);
+            }
+            // Its first vertex is `q`, just drawn.
+            *slot = Splice { f: g, entry: s, done: 1 };
+            depth += 1;
+            spliced += 1;
+        }
+    }
+    spliced
+}
+
+/// The order pass, before its tour: mark drawn ([`DRAWN`]) each closed
+/// loop that the chains will draw inside another polyline, so that the
+/// tour visits only the polylines that start a chain: open ones first (a
+/// loop drawn inside an open path costs no chain of its own), then a loop
+/// of each group of loops crossing one another. Leaves the others' points
+/// not drawn and the lists whole.
+fn mark_spliced(x: &mut Index<'_, '_>) {
+    for open in [true, false] {
+        for f in 0..x.frags {
+            let (from, _) = x.span(f);
+            if x.is_loop(f) == open || x.dead(from) || x.is_dot(f) {
+                continue;
+            }
+            splice_walk(x, f, from, true, |_| {});
+        }
+    }
+    x.relink();
+    for f in 0..x.frags {
+        if x.drawn(f) {
+            let (from, to) = x.span(f);
+            x.kill(from, to);
+        }
+    }
+}
+
+/// A fragment being drawn by [`Walk::emit_spliced`]: entered at point
+/// `entry`, `done` of its points drawn.
+#[derive(Debug, Clone, Copy, Default)]
+struct Splice {
+    f: usize,
+    entry: usize,
+    done: usize,
+}
+
+impl Splice {
+    /// The next point to draw: a loop round from its entry back to it, an
+    /// open fragment from the end it is entered at to the other.
+    fn vertex(&self, x: &Index<'_, '_>) -> Option<usize> {
+        let (from, to) = x.span(self.f);
+        let len = to - from;
+        if x.is_loop(self.f) {
+            let k = self.entry.checked_sub(from)?;
+            return (self.done <= len).then(|| from + (k + self.done) % len.max(1));
+        }
+        if self.done >= len {
+            None
+        } else if self.entry + 1 == to && self.entry != from {
+            Some(to - 1 - self.done)
+        } else {
+            Some(from + self.done)
         }
     }
 }
@@ -1243,19 +1617,19 @@ mod tests {
     /// 2-opt as it was before the lengths were kept: every jump measured
     /// afresh, every candidate's two new jumps computed. The oracle of
     /// `two_opt_keeps_lengths_without_changing_a_move`.
-    fn two_opt_afresh(tour: &Tour, x: &mut Index<'_, '_>) {
+    fn two_opt_afresh(tour: &Tour, x: &mut Index<'_, '_>, window: usize, budget: &mut u64) {
         let n = tour.len;
-        let mut budget: u64 = 8 * WINDOW as u64 * n as u64;
+        let length = |a: Packed, b: Packed| tour.metric.d(a, b);
         let (mut improved, mut passes) = (true, 0);
-        while n >= 3 && improved && budget > 0 && passes < 8 {
+        while n >= 3 && improved && *budget > 0 && passes < 8 {
             passes += 1;
             improved = false;
             for i in 0..n - 1 {
                 let out_i = tour.ends(x, i).1;
                 let in_i1 = tour.ends(x, i + 1).0;
                 let before = length(out_i, in_i1);
-                for j in i + 2..n.min(i + 2 + WINDOW) {
-                    budget = budget.saturating_sub(1);
+                for j in i + 2..n.min(i + 2 + window) {
+                    *budget = budget.saturating_sub(1);
                     let out_j = tour.ends(x, j).1;
                     let after = if j + 1 < n { Some(tour.ends(x, j + 1).0) } else { None };
                     let old = before + after.map_or(0.0, |a| length(out_j, a));
@@ -1266,7 +1640,7 @@ mod tests {
                         break;
                     }
                 }
-                if budget == 0 {
+                if *budget == 0 {
                     break;
                 }
             }
@@ -1277,13 +1651,15 @@ mod tests {
     /// two jumps measured. The oracle of
     /// `best_entries_prunes_without_changing_an_entry`.
     fn best_entries_afresh(tour: &Tour, x: &mut Index<'_, '_>, start: Packed) {
-        let mut prev = start;
+        let m = tour.metric;
+        let mut prev: Option<Packed> = None;
         for k in 0..tour.len {
             let (end, _) = tour.get(&x.w, k);
             let f = x.frag_of(end);
             if x.is_loop(f) {
                 let next = if k + 1 < tour.len { Some(tour.ends(x, k + 1).0) } else { None };
-                let cost = |v: Packed| length(prev, v) + next.map_or(0.0, |n| length(v, n));
+                let into = |v: Packed| prev.map_or_else(|| m.first_jump(start, v), |p| m.d(p, v));
+                let cost = |v: Packed| into(v) + next.map_or(0.0, |n| m.d(v, n));
                 let (from, to) = x.span(f);
                 let mut best = (cost(x.point(end)), end);
                 for i in from..to {
@@ -1294,8 +1670,17 @@ mod tests {
                 }
                 tour.set(&mut x.w, k, best.1, best.1);
             }
-            prev = tour.ends(x, k).1;
+            prev = Some(tour.ends(x, k).1);
         }
+    }
+
+    /// The metrics the tour tests run with: space, and the screen of a
+    /// view of the lattice they draw on.
+    fn metrics() -> [Metric; 2] {
+        let view = crate::view::View { spacing: [1.0; 3], ..crate::view::View::DEFAULT };
+        let bounds = crate::view::Bounds::new(Point3::new(0.0, 0.0, 0.0), Point3::new(60.0, 60.0, 6.0));
+        let t = ViewTransform::fit_sphere(&view, bounds).expect("a view");
+        [Metric::Space, Metric::Screen { view: t, shift: 0, park: [0.0, 0.0] }]
     }
 
     #[test]
@@ -1380,19 +1765,29 @@ mod tests {
                     src.push_raw(q, if n == 0 { kind } else { Kind::Line });
                 }
             }
-            let mut tours = Vec::new();
-            for afresh in [false, true] {
-                let mut scratch = vec![0u8; 64 * 1024];
-                let mut x = Index::build(Source::one(&src), &mut scratch, true, false).expect("room");
-                let mut tour = Tour { base: x.tour_base(), len: 0 };
-                for f in 0..x.frags {
-                    let end = x.span(f).0;
-                    tour.push(&mut x, f, end);
+            for metric in metrics() {
+                let mut tours = Vec::new();
+                for afresh in [false, true] {
+                    let mut scratch = vec![0u8; 64 * 1024];
+                    let mut x = Index::build(Source::one(&src), &mut scratch, true, false).expect("room");
+                    let mut tour = Tour { base: x.tour_base(), len: 0, metric };
+                    for f in 0..x.frags {
+                        let end = x.span(f).0;
+                        tour.push(&mut x, f, end);
+                    }
+                    let mut budget = 8 * WINDOW as u64 * tour.len as u64;
+                    if afresh {
+                        for k in 0..tour.len.saturating_sub(1) {
+                            tour.measure(&mut x, k);
+                        }
+                        two_opt_afresh(&tour, &mut x, WINDOW, &mut budget)
+                    } else {
+                        tour.two_opt(&mut x, WINDOW, &mut budget);
+                    }
+                    tours.push((0..tour.len).map(|k| tour.get(&x.w, k)).collect::<Vec<_>>());
                 }
-                if afresh { two_opt_afresh(&tour, &mut x) } else { tour.two_opt(&mut x) }
-                tours.push((0..tour.len).map(|k| tour.get(&x.w, k)).collect::<Vec<_>>());
+                proptest::prop_assert_eq!(&tours[0], &tours[1]);
             }
-            proptest::prop_assert_eq!(&tours[0], &tours[1]);
         }
     }
 
@@ -1416,19 +1811,25 @@ mod tests {
                     src.push_raw(q, if n == 0 { Kind::Loop } else { Kind::Line });
                 }
             }
-            let mut tours = Vec::new();
-            for afresh in [false, true] {
-                let mut scratch = vec![0u8; 64 * 1024];
-                let mut x = Index::build(Source::one(&src), &mut scratch, true, false).expect("room");
-                let mut tour = Tour { base: x.tour_base(), len: 0 };
-                for (f, (_, at)) in loops.iter().enumerate() {
-                    let (from, to) = x.span(f);
-                    tour.push(&mut x, f, from + at % (to - from));
+            for metric in metrics() {
+                let mut tours = Vec::new();
+                for afresh in [false, true] {
+                    let mut scratch = vec![0u8; 64 * 1024];
+                    let mut x = Index::build(Source::one(&src), &mut scratch, true, false).expect("room");
+                    let mut tour = Tour { base: x.tour_base(), len: 0, metric };
+                    for (f, (_, at)) in loops.iter().enumerate() {
+                        let (from, to) = x.span(f);
+                        tour.push(&mut x, f, from + at % (to - from));
+                    }
+                    if afresh {
+                        best_entries_afresh(&tour, &mut x, start)
+                    } else {
+                        tour.best_entries(&mut x, start)
+                    }
+                    tours.push((0..tour.len).map(|k| tour.get(&x.w, k)).collect::<Vec<_>>());
                 }
-                if afresh { best_entries_afresh(&tour, &mut x, start) } else { tour.best_entries(&mut x, start) }
-                tours.push((0..tour.len).map(|k| tour.get(&x.w, k)).collect::<Vec<_>>());
+                proptest::prop_assert_eq!(&tours[0], &tours[1]);
             }
-            proptest::prop_assert_eq!(&tours[0], &tours[1]);
         }
     }
 
@@ -1572,9 +1973,39 @@ mod tests {
             let mut p2 = store(512);
             let mut dst = Geometry::new(&mut p2);
             let mut scratch = vec![0u8; if tight { 20 * src.len() + 32 } else { 64 * 1024 }];
-            let st = chain(Source::one(&src), &mut dst, &mut scratch, [0; 3], 0.0, Pass::Order);
-            proptest::prop_assert!(st.ordered);
-            proptest::prop_assert_eq!(drawn(&dst), drawn(&src));
+            for metric in metrics() {
+                let st = chain(Source::one(&src), &mut dst, &mut scratch, [0; 3], 0.0, Pass::Order(metric));
+                proptest::prop_assert!(st.ordered);
+                proptest::prop_assert_eq!(drawn(&dst), drawn(&src));
+            }
+        }
+    }
+
+    #[test]
+    fn loops_that_cross_are_drawn_in_one_polyline() {
+        // Square A in z = 0 and square B in x = 2 share two vertices (as
+        // the slices of a chicken-wire surface do); C stands apart.
+        let a = [[0, 0, 0], [2, 0, 0], [4, 0, 0], [4, 4, 0], [2, 4, 0], [0, 4, 0]];
+        let b = [[2, 0, 0], [2, 0, 4], [2, 4, 4], [2, 4, 0]];
+        let c = [[9, 9, 9], [11, 9, 9], [11, 11, 9]];
+        let mut p = store(64);
+        let mut src = Geometry::new(&mut p);
+        src.reset(0);
+        for l in [&a[..], &b[..], &c[..]] {
+            for (n, &q) in l.iter().enumerate() {
+                src.push_raw(q, if n == 0 { Kind::Loop } else { Kind::Line });
+            }
+        }
+        for metric in metrics() {
+            let mut p2 = store(64);
+            let mut dst = Geometry::new(&mut p2);
+            let mut scratch = vec![0u8; 4096];
+            let st = chain(Source::one(&src), &mut dst, &mut scratch, [0; 3], 0.0, Pass::Order(metric));
+            assert_eq!(drawn(&dst), drawn(&src));
+            assert_eq!((st.polylines, st.spliced), (2, 1), "{st:?}");
+            // One jump: from A and B to C (and none from the start, which
+            // chain() does not count).
+            assert!(st.travel > 0.0);
         }
     }
 
@@ -1600,7 +2031,7 @@ mod tests {
                 let (q, k) = one.get(i).unwrap();
                 if i < cut { head.push_raw(q, k) } else { tail.push_raw(q, k) };
             }
-            for pass in [Pass::Stitch, Pass::Order] {
+            for pass in [Pass::Stitch, Pass::Order(Metric::Space)] {
                 let mut out = Vec::new();
                 for src in [Source::one(&one), Source::two(&head, &tail)] {
                     let mut q = store(512);
@@ -1627,7 +2058,7 @@ mod tests {
         let mut p2 = store(16);
         let mut dst = Geometry::new(&mut p2);
         let mut scratch = [0u8; 256];
-        let st = chain(Source::one(&src), &mut dst, &mut scratch, [0; 3], 0.0, Pass::Order);
+        let st = chain(Source::one(&src), &mut dst, &mut scratch, [0; 3], 0.0, Pass::Order(Metric::Space));
         assert!(st.ordered);
         assert_eq!((st.fragments, st.polylines, st.loops, st.points_out), (4, 1, 1, 4));
         assert_eq!(st.travel, 0.0);
@@ -1693,9 +2124,9 @@ mod tests {
         let mut p2 = store(16);
         let mut dst = Geometry::new(&mut p2);
         let mut scratch = [0u8; 256];
-        let st = chain(Source::one(&src), &mut dst, &mut scratch, [0; 3], 0.01, Pass::Order);
+        let st = chain(Source::one(&src), &mut dst, &mut scratch, [0; 3], 0.01, Pass::Order(Metric::Space));
         assert_eq!((st.polylines, st.merged, st.points_out), (1, 1, 3));
-        let st = chain(Source::one(&src), &mut dst, &mut scratch, [0; 3], 0.0, Pass::Order);
+        let st = chain(Source::one(&src), &mut dst, &mut scratch, [0; 3], 0.0, Pass::Order(Metric::Space));
         assert_eq!((st.merged, st.points_out), (0, 4));
     }
 
@@ -1708,7 +2139,7 @@ mod tests {
         seg(&mut src, [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]);
         let mut p2 = store(16);
         let mut dst = Geometry::new(&mut p2);
-        let st = chain(Source::one(&src), &mut dst, &mut [0u8; 8], [0; 3], 0.0, Pass::Order);
+        let st = chain(Source::one(&src), &mut dst, &mut [0u8; 8], [0; 3], 0.0, Pass::Order(Metric::Space));
         assert!(!st.ordered);
         let a: Vec<_> = src.commands().collect();
         let b: Vec<_> = dst.commands().collect();

@@ -226,6 +226,15 @@ impl<'a> Geometry<'a> {
     /// # Errors
     /// The command, when the store is full.
     pub fn push(&mut self, command: Command<Point3>) -> Result<(), Command<Point3>> {
+        self.push_within(command, usize::MAX)
+    }
+
+    /// [`Geometry::push`], as if the store held at most `cap` points.
+    pub(crate) fn push_within(
+        &mut self,
+        command: Command<Point3>,
+        cap: usize,
+    ) -> Result<(), Command<Point3>> {
         let kind = match command {
             Command::LineTo(_) if self.held.broken => {
                 self.held.dropped = self.held.dropped.saturating_add(1);
@@ -238,7 +247,14 @@ impl<'a> Geometry<'a> {
         if kind.starts() {
             self.held.broken = false;
         }
-        if !self.push_raw(self.quantise(*command.point()), kind) {
+        let q = self.quantise(*command.point());
+        let kept = if self.held.len < cap {
+            self.push_raw(q, kind)
+        } else {
+            self.held.dropped = self.held.dropped.saturating_add(1);
+            false
+        };
+        if !kept {
             self.held.broken = true;
             // A MoveTo whose line did not fit would draw nothing: take it back.
             if matches!(self.get(self.held.len.wrapping_sub(1)), Some((_, Kind::Move))) {

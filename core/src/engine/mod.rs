@@ -40,7 +40,7 @@ mod stream;
 
 pub use board::{Board, Capacity};
 pub use chain::ChainStats;
-use chain::Pass;
+use chain::{Metric, Pass};
 use geometry::Source;
 pub use geometry::{Commands, Geometry, Kind, Packed};
 pub use session::REPLAY;
@@ -650,8 +650,28 @@ impl<'a> Engine<'a> {
         let stitched = chain::chain(pieces, &mut self.front, scratch, [0; 3], first, Pass::Stitch);
         let slices = dev.stream.idle_scratch().unwrap_or(&mut []);
         let scratch = if slices.len() >= self.scratch.len() { slices } else { &mut *self.scratch };
-        let ordered =
-            chain::chain(Source::one(&self.front), &mut self.back, scratch, [0; 3], then, Pass::Order);
+        // A still view orders for its own screen (a jump across the depth
+        // costs it nothing); a spinning one in space, for every angle.
+        let view = View { spacing: spec.spacing, bits: dev.beam.bits, ..dev.view };
+        let metric = match ViewTransform::fit_sphere(&view, spec.bounds) {
+            Ok(t) if dev.spin_deg_per_s == 0.0 => {
+                let park = dev.beam.park_sample();
+                Metric::Screen {
+                    view: t,
+                    shift: self.front.shift(),
+                    park: [f32::from(park.x), f32::from(park.y)],
+                }
+            }
+            _ => Metric::Space,
+        };
+        let ordered = chain::chain(
+            Source::one(&self.front),
+            &mut self.back,
+            scratch,
+            [0; 3],
+            then,
+            Pass::Order(metric),
+        );
         core::mem::swap(&mut self.front, &mut self.back);
         self.back.reset(self.back.shift());
         self.chain = ChainStats {

@@ -14,6 +14,7 @@
 //! refreshed in between; the next slice's data then waits for the job
 //! (the caller stops feeding), or finishes it first if it comes anyway.
 
+use super::chain;
 use super::geometry::{Geometry, Held};
 use crate::command::{Command, CommandSink, Point3};
 use crate::contour::{ContourStats, RowContourer};
@@ -77,6 +78,8 @@ pub(crate) struct Transfer {
     pub stats: ContourStats,
     /// What the last completed slice still has to contour.
     pub job: Option<Job>,
+    /// Fragments of the surface kept so far.
+    pub frags: u32,
 }
 
 /// The planes a [`Job`] contours, in order.
@@ -127,10 +130,18 @@ pub(crate) struct Stream<'a> {
 }
 
 /// Keeps every command: in the back while it has room, then in the spill;
-/// the store that refuses one counts it.
+/// the store that refuses one counts it. The spill stops short of its room
+/// by the scratch the stitch pass will want for all the pieces kept
+/// ([`chain::stitch_reserve`]), in the slice memory, which the spill then
+/// shares with it: a surface larger than the board holds is cut, but what
+/// is kept is stitched and ordered.
 struct Keep<'g, 'a, 's> {
     back: &'g mut Geometry<'a>,
     spill: &'g mut Geometry<'s>,
+    /// Fragments kept so far (back and spill).
+    frags: &'g mut u32,
+    /// Bytes of the whole slice memory.
+    memory: usize,
 }
 
 impl CommandSink<Point3> for Keep<'_, '_, '_> {
@@ -144,7 +155,18 @@ impl CommandSink<Point3> for Keep<'_, '_, '_> {
         // last slot (were the spill full, that `MoveTo` would be left alone).
         let back = self.spill.capacity() == 0
             || (self.spill.is_empty() && (room > 1 || (room == 1 && !matches!(c, Command::MoveTo(_)))));
-        let _ = if back { self.back.push(c) } else { self.spill.push(c) };
+        let starts = !matches!(c, Command::LineTo(_));
+        let kept = if back {
+            self.back.push(c).is_ok()
+        } else {
+            let frags = *self.frags as usize + usize::from(starts);
+            let points = self.back.len() + self.spill.len() + 1;
+            let cap = Geometry::points_in(self.memory.saturating_sub(chain::stitch_reserve(frags, points)));
+            self.spill.push_within(c, cap).is_ok()
+        };
+        if kept && starts {
+            *self.frags = self.frags.saturating_add(1);
+        }
         Ok(())
     }
 }
@@ -254,6 +276,7 @@ impl<'a> Stream<'a> {
             last_ms: now_ms,
             stats: ContourStats::default(),
             job: None,
+            frags: 0,
         });
         // The spill starts after the transfer's two slots.
         self.spill = Some((2 * self.slot_bytes(), Held::empty(shift)));
@@ -343,13 +366,14 @@ impl<'a> Stream<'a> {
         let mut left = true;
         let n = self.slot_bytes();
         let (at, held) = self.spill.unwrap_or((2 * n, Held::empty(geometry.shift())));
+        let memory = self.slots.len();
         let (slots, rest) = self.slots.split_at_mut(at.min(self.slots.len()));
         let mut spill = Geometry::lent(rest, held);
         if let Ok(mut rc) = RowContourer::new::<Infallible>(t.spec.levels.as_slice(), Traversal::Corrected) {
             // (Making the contourer clears its 2 KB of scratch: a short row
             // should not pay that alone.)
             let mut done = 0usize;
-            let mut sink = Keep { back: geometry, spill: &mut spill };
+            let mut sink = Keep { back: geometry, spill: &mut spill, frags: &mut t.frags, memory };
             let (s0, s1) = slots.split_at(n.min(slots.len()));
             let slots = [s0, s1];
             loop {
@@ -468,7 +492,8 @@ mod tests {
     fn keep_all(back: usize, spill: usize, cmds: &[Command<Point3>]) -> ([usize; 2], Vec<(u16, Kind)>) {
         let (mut b, mut s) = (vec![0u8; Geometry::bytes_for(back)], vec![0u8; Geometry::bytes_for(spill)]);
         let (mut back, mut spill) = (Geometry::new(&mut b), Geometry::new(&mut s));
-        let mut keep = Keep { back: &mut back, spill: &mut spill };
+        let mut frags = 0;
+        let mut keep = Keep { back: &mut back, spill: &mut spill, frags: &mut frags, memory: usize::MAX };
         for &c in cmds {
             let _ = keep.command(0, c);
         }
