@@ -148,7 +148,7 @@ impl<'a> InProcess<'a> {
         }
         match refused {
             None => Ok(()),
-            Some(code) => Err(anyhow!("the board refused it: {}", refusal(code))),
+            Some(code) => Err(Refused(code).into()),
         }
     }
 
@@ -227,6 +227,18 @@ fn msg_seq(msg: &Message<'_>) -> u16 {
         Message::Hello { .. } | Message::Capabilities { .. } => 0,
     }
 }
+
+/// The board refused a command (it answered `Nack` with this code).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Refused(pub NackCode);
+
+impl std::fmt::Display for Refused {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "the board refused it: {}", refusal(self.0))
+    }
+}
+
+impl std::error::Error for Refused {}
 
 /// What a refusal means, in a user's words.
 pub fn refusal(code: NackCode) -> &'static str {

@@ -78,6 +78,13 @@ pub struct ViewSetting {
     pub spin_deg_per_s: f32,
 }
 
+impl ViewSetting {
+    /// The perspective's field of view, `None` for orthographic.
+    pub fn perspective(&self) -> Option<f32> {
+        (self.fov_deg != 0.0).then_some(self.fov_deg)
+    }
+}
+
 /// How to send.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SendConfig {

@@ -108,6 +108,11 @@ struct SendArgs {
     /// Set the view first: spin about the vertical axis, degrees per second.
     #[arg(long, allow_hyphen_values = true)]
     spin: Option<f32>,
+    /// The board's kind (f407: the firmware's STM32F407): before sending,
+    /// say what it will show of this volume, and refuse a volume it cannot
+    /// take, without a round trip.
+    #[arg(long, value_name = "NAME", value_parser = parse_board)]
+    board: Option<Board>,
 }
 
 #[derive(Args, Debug)]
@@ -215,6 +220,11 @@ struct WavArgs {
     /// 32-bit float samples instead of 16-bit PCM.
     #[arg(long)]
     float: bool,
+    /// Draw with the scope beam of `render` and the board (and so the
+    /// board's very samples, played at the audio rate: slower, dimmer
+    /// where the beam moves fast) instead of one made for audio rates.
+    #[arg(long)]
+    scope_beam: bool,
     #[command(flatten)]
     board: BoardArgs,
 }
@@ -701,7 +711,11 @@ fn finish_scene(scene: &Scene, board: &BoardArgs) -> Result<()> {
 }
 
 fn wav(args: &WavArgs) -> Result<()> {
-    let mut beam = audio_beam(args.audio_rate, args.view.bits);
+    let mut beam = if args.scope_beam {
+        BeamConfig { bits: args.view.bits, ..BeamConfig::default() }
+    } else {
+        audio_beam(args.audio_rate, args.view.bits)
+    };
     if let Some(step) = args.lit_step {
         beam.lit_step = step;
     }
@@ -750,6 +764,32 @@ fn send(args: &SendArgs) -> Result<()> {
         spin_deg_per_s: args.spin.unwrap_or(0.0),
     });
     let wire = WireVolume::from_loaded(&vol)?;
+    if let Some(board) = args.board {
+        // What that board will show: the same engine with its memory.
+        let mut preview = SceneConfig::board(board, levels.clone());
+        preview.planes = planes(&args.input.axes)?;
+        preview.every = usize::from(args.every);
+        if let Some(v) = view {
+            let [yaw, pitch, roll] = v.angles;
+            let projection = match v.perspective() {
+                Some(fov_deg) => Projection::Perspective { fov_deg },
+                None => Projection::Orthographic,
+            };
+            preview.view = View { yaw, pitch, roll, projection, ..preview.view };
+        }
+        let scene = scene::build(&wire, &preview)
+            .with_context(|| format!("the {} board cannot take this volume", board.name))?;
+        for r in scene.remarks() {
+            eprintln!("isoscope-sim: {r}");
+        }
+        eprintln!(
+            "isoscope-sim: the {} board will show {} polylines, {} points, at {:.1} frames/s",
+            board.name,
+            scene.polylines,
+            scene.points,
+            scene.fps()
+        );
+    }
     let cfg = SendConfig {
         levels,
         axes,

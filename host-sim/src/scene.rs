@@ -10,7 +10,7 @@
 //! [`Memory::Host`] it gets room for the whole surface (it grows until the
 //! surface fits): the same code, more memory.
 
-use crate::board::{HostBuffers, InProcess, Loaded, check_levels, host_capacity};
+use crate::board::{HostBuffers, InProcess, Loaded, Refused, check_levels, host_capacity};
 use crate::link::{SendConfig, WireVolume};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
@@ -21,7 +21,7 @@ use isoscope_core::engine::{Board, Capacity, ChainStats, EngineConfig};
 use isoscope_core::grid::Plane;
 use isoscope_core::screen::ScreenPoint;
 use isoscope_core::view::View;
-use isoscope_core::wire::{AXIS_X, AXIS_Y, AXIS_Z, MAX_CHUNK};
+use isoscope_core::wire::{AXIS_X, AXIS_Y, AXIS_Z, MAX_CHUNK, NackCode};
 
 /// How much memory the engine gets.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -194,7 +194,22 @@ pub fn with_board<R>(
     loop {
         let mut mem = HostBuffers::new(&capacity);
         let mut board = InProcess::new(&mut mem, cfg.engine())?;
-        let loaded = board.load(vol, &send, progress).context("putting the volume on the board")?;
+        let loaded = match board.load(vol, &send, progress) {
+            Ok(l) => l,
+            Err(e) if e.downcast_ref::<Refused>() == Some(&Refused(NackCode::DimsOverCapacity)) => bail!(
+                "a {}x{} slice of {:?} is {} bytes; {} holds {} (send a smaller or resampled volume)",
+                vol.dims[0],
+                vol.dims[1],
+                vol.sample_type,
+                vol.slice_bytes(),
+                match cfg.memory {
+                    Memory::Board(b) => format!("the {} board", b.name),
+                    Memory::Host => "the host's memory".into(),
+                },
+                capacity.slice_bytes
+            ),
+            Err(e) => return Err(e.context("putting the volume on the board")),
+        };
         let grow = cfg.memory == Memory::Host && !loaded.whole() && capacity.points < HOST_MAX_POINTS;
         if grow {
             capacity = host_capacity(capacity.slice_bytes, capacity.extent, capacity.points * 4);

@@ -738,3 +738,41 @@ fn big_endian_raw_files() {
         run(&["contour", &pb, "--dims", "2x2x2", "--dtype", "i16", "--level", "1", "--endian", "middle"]);
     assert!(!out.status.success());
 }
+
+/// `--board` shows what that board would: a note where it cuts the
+/// surface, and a plain refusal of slices it cannot hold, before `send`
+/// opens the port.
+#[test]
+fn board_preset_says_what_the_board_cannot_hold() {
+    let out = run(&["stats", "--demo", "gyroid:48", "--board", "f407"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let err = text(&out.stderr);
+    assert!(err.contains("note: the f407 board holds less than this surface"), "{err}");
+    assert!(err.contains("pieces were dropped"), "{err}");
+    let out = run(&["stats", "--demo", "gyroid:48"]);
+    assert!(!text(&out.stderr).contains("note: the"), "{}", text(&out.stderr));
+    for cmd in ["render", "send"] {
+        let out = run(&[
+            cmd,
+            "--demo",
+            "gyroid:100",
+            "--board",
+            "f407",
+            "--port",
+            "tcp:127.0.0.1:1",
+            "-o",
+            "/dev/null",
+        ]
+        .into_iter()
+        .filter(|a| cmd == "send" || !a.starts_with("--port") && !a.starts_with("tcp:"))
+        .filter(|a| cmd == "render" || (*a != "-o" && *a != "/dev/null"))
+        .collect::<Vec<_>>());
+        assert!(!out.status.success());
+        let err = text(&out.stderr);
+        assert!(
+            err.contains("a 100x100 slice of F32 is 40000 bytes; the f407 board holds 32768"),
+            "{cmd}: {err}"
+        );
+        assert!(!err.contains("Connection refused"), "{cmd} tried the port: {err}");
+    }
+}

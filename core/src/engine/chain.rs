@@ -41,7 +41,7 @@
 //! [`RINGS`] rings of the beam, else the next cell in scan order with an
 //! end left (a cursor that only moves on, `O(cells)` in all).
 
-use super::geometry::{Geometry, Kind, Packed, Source};
+use super::geometry::{Geometry, Kind, Packed, Source, pack};
 use crate::command::Point3;
 use crate::fastmath::sqrt;
 use crate::view::ViewTransform;
@@ -403,9 +403,8 @@ impl<'s, 'g> Index<'s, 'g> {
         let mut index =
             Self { src, w, n, bits, heads, links, dead, frags, any_vertex, buckets, odd: Some(0) };
         if any_vertex {
-            for f in 0..frags {
-                index.each_slot(f, |x, s| x.link(s));
-            }
+            // The order pass links what it needs when it needs it
+            // ([`Index::relink`]).
         } else {
             // The stitch pass: a fragment's span, end points and kind read
             // once for its two links and its share of `odd` (what
@@ -594,10 +593,24 @@ impl<'s, 'g> Index<'s, 'g> {
         }
     }
 
-    /// The order pass, once its tour is made: no point drawn, and every end
-    /// (every vertex of a loop) back in its cell's list (the searches took
-    /// the drawn ones out), for the splices of [`Walk::emit_spliced`].
-    fn relink(&mut self) {
+    /// The order pass: no point drawn, and the ends (every vertex of a
+    /// loop) in lists: of the fragments not marked drawn, in the grid's
+    /// cells, for the tour's searches around a point; or (`hashed`) of the
+    /// loops, in buckets of a hash of the point, for the splices' exact
+    /// lookups ([`Index::loop_at`]: a sheet crowds the cells it passes
+    /// through, and a lookup at every point drawn walked them).
+    fn relink(&mut self, hashed: bool) {
+        // The buckets' heads: in the scratch past the drawn bits where that
+        // holds more than the grid's (up to two a point: short lists), else
+        // the grid's heads serve as as many.
+        let grid: usize = self.n.iter().map(|&n| n as usize).product();
+        let free = self.dead + self.src.len().div_ceil(32);
+        let spare = self.w.len().saturating_sub(free);
+        (self.heads, self.buckets) = match hashed {
+            true if spare > grid => (free, spare.min(2 * self.src.len())),
+            true => (self.frags, grid),
+            false => (self.frags, 0),
+        };
         for c in 0..self.cells() {
             self.w.set(self.heads + c, NONE);
         }
@@ -605,7 +618,11 @@ impl<'s, 'g> Index<'s, 'g> {
             self.w.set(d, 0);
         }
         for f in 0..self.frags {
-            self.each_slot(f, |x, s| x.link(s));
+            // The splices look up loops alone; the tour's searches the
+            // polylines not marked drawn ([`mark_spliced`]).
+            if if hashed { self.is_loop(f) } else { !self.drawn(f) } {
+                self.each_slot(f, |x, s| x.link(s));
+            }
         }
     }
 
@@ -614,12 +631,13 @@ impl<'s, 'g> Index<'s, 'g> {
         self.dead(self.span(f).0)
     }
 
-    /// The order pass: a vertex exactly at `q` of a closed loop not drawn
-    /// yet.
+    /// The order pass, its lists hashed ([`Index::relink`]): a vertex
+    /// exactly at `q` of a closed loop not drawn yet.
     fn loop_at(&self, q: Packed) -> Option<usize> {
         let mut found = None;
+        let raw = pack(q);
         self.each_end(self.cell(q), |s| {
-            if self.point(s) == q && self.is_loop(self.frag_of(s)) {
+            if self.src.is_at(s, &raw) {
                 found = Some(s);
                 return false;
             }
@@ -901,7 +919,7 @@ fn chain_on(
             // Drawn in the tour's order; a loop that passes exactly
             // through a point being drawn is drawn there, and the beam goes
             // on from where it came back (no jump to it, none from it).
-            x.relink();
+            x.relink(true);
             for k in 0..tour.len {
                 let (end, _) = tour.get(&x.w, k);
                 let f = x.frag_of(end);
@@ -1382,15 +1400,14 @@ fn splice_walk(
     let (from, to) = x.span(f);
     x.kill(from, to);
     let mut stack = [Splice::default(); SPLICE_DEPTH];
-    stack[0] = Splice { f, entry: end, done: 0 };
+    stack[0] = Splice::new(from, to, end, x.is_loop(f));
     let mut depth: usize = 1;
     let mut spliced = 0;
     while let Some(top) = depth.checked_sub(1).and_then(|d| stack.get_mut(d)) {
-        let Some(i) = top.vertex(x) else {
+        let Some(i) = top.next() else {
             depth -= 1;
             continue;
         };
-        top.done += 1;
         let q = x.point(i);
         visit(q);
         if depth < SPLICE_DEPTH
@@ -1405,7 +1422,8 @@ fn splice_walk(
                 x.w.set(g, w | DRAWN);
             }
             // Its first vertex is `q`, just drawn.
-            *slot = Splice { f: g, entry: s, done: 1 };
+            *slot = Splice::new(gf, gt, s, true);
+            slot.next();
             depth += 1;
             spliced += 1;
         }
@@ -1417,9 +1435,10 @@ fn splice_walk(
 /// loop that the chains will draw inside another polyline, so that the
 /// tour visits only the polylines that start a chain: open ones first (a
 /// loop drawn inside an open path costs no chain of its own), then a loop
-/// of each group of loops crossing one another. Leaves the others' points
-/// not drawn and the lists whole.
+/// of each group of loops crossing one another. Leaves no point drawn and
+/// the others' ends in the grid's lists.
 fn mark_spliced(x: &mut Index<'_, '_>) {
+    x.relink(true);
     for open in [true, false] {
         for f in 0..x.frags {
             let (from, _) = x.span(f);
@@ -1429,41 +1448,48 @@ fn mark_spliced(x: &mut Index<'_, '_>) {
             splice_walk(x, f, from, true, |_| {});
         }
     }
-    x.relink();
-    for f in 0..x.frags {
-        if x.drawn(f) {
-            let (from, to) = x.span(f);
-            x.kill(from, to);
-        }
-    }
+    x.relink(false);
 }
 
-/// A fragment being drawn by [`Walk::emit_spliced`]: entered at point
-/// `entry`, `done` of its points drawn.
+/// A fragment being drawn by [`Walk::emit_spliced`].
 #[derive(Debug, Clone, Copy, Default)]
 struct Splice {
-    f: usize,
-    entry: usize,
-    done: usize,
+    /// The fragment's points.
+    from: usize,
+    to: usize,
+    /// The next point, and how many are left.
+    at: usize,
+    left: usize,
+    /// Drawn from the last point to the first.
+    back: bool,
 }
 
 impl Splice {
-    /// The next point to draw: a loop round from its entry back to it, an
-    /// open fragment from the end it is entered at to the other.
-    fn vertex(&self, x: &Index<'_, '_>) -> Option<usize> {
-        let (from, to) = x.span(self.f);
-        let len = to - from;
-        if x.is_loop(self.f) {
-            let k = self.entry.checked_sub(from)?;
-            return (self.done <= len).then(|| from + (k + self.done) % len.max(1));
+    /// Fragment `from..to` entered at point `entry`: a loop round from its
+    /// entry back to it, an open fragment from the end it is entered at to
+    /// the other.
+    fn new(from: usize, to: usize, entry: usize, is_loop: bool) -> Self {
+        let len = to.saturating_sub(from);
+        if is_loop {
+            let at = entry.clamp(from, to.saturating_sub(1).max(from));
+            return Self { from, to, at, left: len + 1, back: false };
         }
-        if self.done >= len {
-            None
-        } else if self.entry + 1 == to && self.entry != from {
-            Some(to - 1 - self.done)
+        let back = entry + 1 == to && entry != from;
+        Self { from, to, at: if back { entry } else { from }, left: len, back }
+    }
+
+    /// The next point to draw.
+    fn next(&mut self) -> Option<usize> {
+        self.left = self.left.checked_sub(1)?;
+        let i = self.at;
+        self.at = if self.back {
+            i.saturating_sub(1)
+        } else if i + 1 >= self.to {
+            self.from
         } else {
-            Some(from + self.done)
-        }
+            i + 1
+        };
+        Some(i)
     }
 }
 

@@ -417,6 +417,15 @@ impl<'g> Source<'g> {
         }
     }
 
+    /// Whether point `i` is exactly `q` ([`pack`]ed): its stored bytes
+    /// compared, not unpacked.
+    #[inline]
+    pub(crate) fn is_at(&self, i: usize, q: &[u8; 6]) -> bool {
+        let [head, tail] = self.points;
+        let p = if i < head.len() { head.get(i) } else { tail.get(i - head.len()) };
+        p == Some(q)
+    }
+
     /// Point `i` alone.
     #[inline]
     pub(crate) fn point_at(&self, i: usize) -> Option<Packed> {
@@ -448,7 +457,7 @@ fn kind_in(kinds: &[u8], i: usize) -> Option<Kind> {
 
 /// A point as its 6 stored bytes.
 #[inline]
-fn pack([x, y, z]: Packed) -> [u8; 6] {
+pub(crate) fn pack([x, y, z]: Packed) -> [u8; 6] {
     let ([a, b], [c, d], [e, f]) = (x.to_le_bytes(), y.to_le_bytes(), z.to_le_bytes());
     [a, b, c, d, e, f]
 }

@@ -161,7 +161,9 @@ impl CommandSink<Point3> for Keep<'_, '_, '_> {
         } else {
             let frags = *self.frags as usize + usize::from(starts);
             let points = self.back.len() + self.spill.len() + 1;
-            let cap = Geometry::points_in(self.memory.saturating_sub(chain::stitch_reserve(frags, points)));
+            // Room for one more spilled point beside the stitch's scratch.
+            let need = Geometry::bytes_for(self.spill.len() + 1) + chain::stitch_reserve(frags, points);
+            let cap = if need <= self.memory { usize::MAX } else { 0 };
             self.spill.push_within(c, cap).is_ok()
         };
         if kept && starts {
