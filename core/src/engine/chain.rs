@@ -1067,6 +1067,25 @@ impl Tour {
     /// either finds a move (and the budget lasts), then each loop entered
     /// at its best vertex.
     fn improve(&self, x: &mut Index<'_, '_>, start: Packed) {
+        if let Some(mut near) = Near::build(x, self) {
+            // Moves among screen neighbours: every step's, however long the
+            // tour, until a pass finds none; the loops' entries chosen
+            // again after each pass (and the neighbours found again).
+            let mut budget = SEARCH_BUDGET;
+            for _ in 0..16 {
+                let a = self.two_opt_near(x, &near, &mut budget);
+                let b = self.or_opt_near(x, &near, &mut budget);
+                self.best_entries(x, start);
+                if !(a || b) || budget == 0 {
+                    break;
+                }
+                match Near::build(x, self) {
+                    Some(n) => near = n,
+                    None => break,
+                }
+            }
+            return;
+        }
         let n = self.len as u64;
         // Steps a 2-opt move reverses, and positions an or-opt move tries:
         // all of them while a pass costs no more than an eighth of the
@@ -1132,39 +1151,218 @@ impl Tour {
                 }
             }
             if let Some((_, k, flip)) = best {
-                self.relocate(x, i, k, flip);
+                self.relocate(x, i, 1, k, flip);
                 moved = true;
             }
         }
         moved
     }
 
-    /// Move step `i` to just after step `k` (`k` counted before the move),
-    /// drawn the other way if `flip`, and measure the jumps again.
-    fn relocate(&self, x: &mut Index<'_, '_>, i: usize, k: usize, flip: bool) {
-        let (e, o) = self.get(&x.w, i);
-        let (e, o) = if flip { (o, e) } else { (e, o) };
+    /// Or-opt among screen neighbours: each step tried just after a step
+    /// that leaves it, or just before one that enters it, within the gain
+    /// of taking it out of the tour. Returns whether it moved one.
+    fn or_opt_near(&self, x: &mut Index<'_, '_>, near: &Near, budget: &mut u64) -> bool {
+        let n = self.len;
+        if n < 4 {
+            return false;
+        }
+        let m = self.metric;
+        let mut moved = false;
+        for (len, i) in (1..=OR_CHAIN).flat_map(|len| (1..n.saturating_sub(len - 1)).map(move |i| (len, i))) {
+            if *budget == 0 {
+                break;
+            }
+            if i + len > n {
+                continue;
+            }
+            // The run i .. i + len, entered at e and left at o.
+            let last = i + len - 1;
+            let (e, o) = (self.ends(x, i).0, self.ends(x, last).1);
+            let (ei, oi) = (self.get(&x.w, i).0, self.get(&x.w, last).1);
+            let prev = self.ends(x, i - 1).1;
+            let next = (last + 1 < n).then(|| self.ends(x, last + 1).0);
+            let gain = self.jump(&x.w, i - 1) + if last + 1 < n { self.jump(&x.w, last) } else { 0.0 }
+                - next.map_or(0.0, |nx| m.d(prev, nx));
+            if gain <= 1e-3 {
+                continue;
+            }
+            let mut best: Option<(f32, usize, bool)> = None;
+            let mut consider = |x: &Index<'_, '_>, k: usize, budget: &mut u64| {
+                if (i - 1..=last).contains(&k) || k >= n {
+                    return;
+                }
+                *budget = budget.saturating_sub(1);
+                let a = self.ends(x, k).1;
+                let b = (k + 1 < n).then(|| self.ends(x, k + 1).0);
+                let old = if k + 1 < n { self.jump(&x.w, k) } else { 0.0 };
+                for flip in [false, true] {
+                    let (ie, io) = if flip { (o, e) } else { (e, o) };
+                    let add = m.d(a, ie) + b.map_or(0.0, |b| m.d(io, b)) - old;
+                    if add + 1e-3 < gain && best.is_none_or(|(c, ..)| add < c) {
+                        best = Some((add, k, flip));
+                    }
+                }
+            };
+            for end in [ei, oi] {
+                near.each_near(
+                    x,
+                    m,
+                    x.point(end),
+                    gain,
+                    |x, c, budget| {
+                        let j = near.pos(x, c);
+                        let (ej, oj) = self.get(&x.w, j);
+                        if oj == c {
+                            consider(x, j, budget);
+                        }
+                        if ej == c && j > 0 {
+                            consider(x, j - 1, budget);
+                        }
+                    },
+                    budget,
+                );
+                if ei == oi {
+                    break;
+                }
+            }
+            if let Some((_, k, flip)) = best {
+                let dest = self.relocate(x, i, len, k, flip);
+                near.place(x, self, i.min(dest), last.max(dest + len - 1));
+                moved = true;
+            }
+        }
+        moved
+    }
+
+    /// 2-opt among screen neighbours: a run reversed where a step's exit
+    /// is near the exit of a later one, or its entry near the entry of an
+    /// earlier one, closer than the jump it leaves by. Returns whether it
+    /// reversed one.
+    fn two_opt_near(&self, x: &mut Index<'_, '_>, near: &Near, budget: &mut u64) -> bool {
+        let n = self.len;
+        if n < 3 {
+            return false;
+        }
+        for k in 0..n - 1 {
+            self.measure(x, k);
+        }
+        let m = self.metric;
+        let mut any = false;
+        for i in 0..n - 1 {
+            if *budget == 0 {
+                break;
+            }
+            // The jump out of step i, replaced by one to a later step's exit:
+            // reverse i + 1 ..= j.
+            let (_, oi) = self.get(&x.w, i);
+            let mut found = None;
+            near.each_near(
+                x,
+                m,
+                x.point(oi),
+                self.jump(&x.w, i),
+                |x, c, budget| {
+                    let j = near.pos(x, c);
+                    if found.is_some() || j < i + 2 || self.get(&x.w, j).1 != c {
+                        return;
+                    }
+                    *budget = budget.saturating_sub(1);
+                    let old = self.jump(&x.w, i) + if j + 1 < n { self.jump(&x.w, j) } else { 0.0 };
+                    let in_i1 = self.ends(x, i + 1).0;
+                    let new = m.d(x.point(oi), x.point(c))
+                        + if j + 1 < n { m.d(in_i1, self.ends(x, j + 1).0) } else { 0.0 };
+                    if new + 1e-3 < old {
+                        found = Some(j);
+                    }
+                },
+                budget,
+            );
+            if let Some(j) = found {
+                self.reverse(x, i + 1, j);
+                self.measure(x, i);
+                if j + 1 < n {
+                    self.measure(x, j);
+                }
+                near.place(x, self, i + 1, j);
+                any = true;
+                continue;
+            }
+            // The jump into step i + 1, replaced by one from an earlier
+            // step's entry: reverse l ..= i.
+            if i == 0 {
+                continue;
+            }
+            let (e1, _) = self.get(&x.w, i + 1);
+            near.each_near(
+                x,
+                m,
+                x.point(e1),
+                self.jump(&x.w, i),
+                |x, c, budget| {
+                    let l = near.pos(x, c);
+                    if found.is_some() || l == 0 || l >= i || self.get(&x.w, l).0 != c {
+                        return;
+                    }
+                    *budget = budget.saturating_sub(1);
+                    let old = self.jump(&x.w, l - 1) + self.jump(&x.w, i);
+                    let new = m.d(self.ends(x, l - 1).1, self.ends(x, i).1) + m.d(x.point(c), x.point(e1));
+                    if new + 1e-3 < old {
+                        found = Some(l);
+                    }
+                },
+                budget,
+            );
+            if let Some(l) = found {
+                self.reverse(x, l, i);
+                self.measure(x, l - 1);
+                self.measure(x, i);
+                near.place(x, self, l, i);
+                any = true;
+            }
+        }
+        any
+    }
+
+    /// Move the `len` steps from `i` (at most [`OR_CHAIN`]) to just after
+    /// step `k` (counted before the move, outside the run), drawn the
+    /// other way round if `flip`, and measure the jumps again. Returns
+    /// where the run starts now.
+    fn relocate(&self, x: &mut Index<'_, '_>, i: usize, len: usize, k: usize, flip: bool) -> usize {
+        let len = len.clamp(1, OR_CHAIN);
+        let mut run = [(0usize, 0usize); OR_CHAIN];
+        for (d, slot) in run.iter_mut().take(len).enumerate() {
+            *slot = self.get(&x.w, i + d);
+        }
+        if flip && let Some(r) = run.get_mut(..len) {
+            {
+                r.reverse();
+                for s in r {
+                    *s = (s.1, s.0);
+                }
+            }
+        }
         let dest = if k < i {
             for j in (k + 1..i).rev() {
                 let (a, b) = self.get(&x.w, j);
-                self.set(&mut x.w, j + 1, a, b);
+                self.set(&mut x.w, j + len, a, b);
             }
             k + 1
         } else {
-            for j in i..k {
-                let (a, b) = self.get(&x.w, j + 1);
-                self.set(&mut x.w, j, a, b);
+            for j in i + len..=k {
+                let (a, b) = self.get(&x.w, j);
+                self.set(&mut x.w, j - len, a, b);
             }
-            k
+            k + 1 - len
         };
-        self.set(&mut x.w, dest, e, o);
-        let (lo, hi) = (i.min(dest).saturating_sub(1), i.max(dest).min(self.len - 1));
-        for j in lo..hi.min(self.len - 1) {
+        for (d, &(a, b)) in run.iter().take(len).enumerate() {
+            self.set(&mut x.w, dest + d, a, b);
+        }
+        let lo = i.min(dest).saturating_sub(1);
+        let hi = (i.max(dest) + len).min(self.len - 1);
+        for j in lo..hi {
             self.measure(x, j);
         }
-        if hi + 1 < self.len {
-            self.measure(x, hi);
-        }
+        dest
     }
 
     /// 2-opt: reverse a run of up to [`WINDOW`] steps (each drawn the other
@@ -1284,6 +1482,155 @@ impl Tour {
                 self.set(&mut x.w, k, best.1, best.1);
             }
             prev = Some(self.ends(x, k).1);
+        }
+    }
+}
+
+/// Steps an or-opt move takes along at most (among screen neighbours).
+const OR_CHAIN: usize = 3;
+
+/// Rings of cells [`Near::each_near`] searches at most around a point.
+const NEAR_RINGS: usize = 3;
+
+/// The order pass's neighbours on the screen: the ends of the tour's steps
+/// in a grid of cells on the metric's screen, and each step's position in
+/// the tour by fragment. In the index's cell heads and links, idle from the
+/// tour's nearest-neighbour search until the splices' [`Index::relink`]
+/// (or, where the grid is small, in the words past the drawn bits): the
+/// positions, the grid's heads after them, and a link a point.
+struct Near {
+    pos: usize,
+    heads: usize,
+    cells: [usize; 2],
+    lo: [f32; 2],
+    /// Cells per screen unit.
+    scale: f32,
+}
+
+impl Near {
+    /// The neighbours of `tour`'s steps, for a [`Metric::Screen`] tour
+    /// with the room; `None` otherwise (the windowed search then serves).
+    fn build(x: &mut Index<'_, '_>, tour: &Tour) -> Option<Near> {
+        let Metric::Screen { view, shift, .. } = tour.metric else { return None };
+        let n = tour.len;
+        if n < 8 || x.buckets != 0 {
+            return None;
+        }
+        // The positions and the heads: in the grid's heads, or else in the
+        // words past the drawn bits.
+        let grid: usize = x.n.iter().map(|&c| c as usize).product();
+        let free = x.dead + x.src.len().div_ceil(32);
+        let spare = x.w.len().saturating_sub(free);
+        let (pos, room) = if grid >= spare {
+            (x.frags, grid.checked_sub(x.frags + 16)? + 16)
+        } else {
+            (free, spare.checked_sub(x.frags + 16)? + 16)
+        };
+        let at = |q: Packed| Metric::at(&view, shift, q);
+        let (mut lo, mut hi) = ([f32::MAX; 2], [f32::MIN; 2]);
+        for k in 0..n {
+            let (e, o) = tour.get(&x.w, k);
+            for p in [e, o] {
+                let s = at(x.point(p));
+                for ((l, h), v) in lo.iter_mut().zip(hi.iter_mut()).zip(s) {
+                    *l = l.min(v);
+                    *h = h.max(v);
+                }
+            }
+        }
+        // About one end a cell.
+        let want = room.min(2 * n).max(1) as f32;
+        let (w, h) = ((hi[0] - lo[0]).max(1.0), (hi[1] - lo[1]).max(1.0));
+        let mut scale = sqrt(want / (w * h));
+        if !scale.is_finite() || scale <= 0.0 {
+            return None;
+        }
+        let dim = |v: f32, scale: f32| ((v * scale) as usize + 1).clamp(1, 1 << 15);
+        // Coarser until the cells fit (a thin strip rounds up).
+        let mut cells = [dim(w, scale), dim(h, scale)];
+        for _ in 0..64 {
+            if cells[0] * cells[1] <= room {
+                break;
+            }
+            scale *= 0.75;
+            cells = [dim(w, scale), dim(h, scale)];
+        }
+        if cells[0] * cells[1] > room {
+            return None;
+        }
+        let near = Near { pos, heads: pos + x.frags, cells, lo, scale };
+        for c in 0..cells[0] * cells[1] {
+            x.w.set(near.heads + c, NONE);
+        }
+        for k in 0..n {
+            let (e, o) = tour.get(&x.w, k);
+            for p in [e, o] {
+                let c = near.cell_of(at(x.point(p)));
+                let head = x.w.get(near.heads + c);
+                x.w.set(x.links + p, head);
+                x.w.set(near.heads + c, p as u32);
+                if e == o {
+                    break;
+                }
+            }
+        }
+        near.place(x, tour, 0, n - 1);
+        Some(near)
+    }
+
+    fn coords(&self, s: [f32; 2]) -> [usize; 2] {
+        let c = |v: f32, lo: f32, cells: usize| {
+            let v = (v - lo) * self.scale;
+            if v > 0.0 { (v as usize).min(cells - 1) } else { 0 }
+        };
+        [c(s[0], self.lo[0], self.cells[0]), c(s[1], self.lo[1], self.cells[1])]
+    }
+
+    fn cell_of(&self, s: [f32; 2]) -> usize {
+        let [cx, cy] = self.coords(s);
+        cx + self.cells[0] * cy
+    }
+
+    /// Record that steps `a ..= b` of the tour are where they are now.
+    fn place(&self, x: &mut Index<'_, '_>, tour: &Tour, a: usize, b: usize) {
+        for k in a..=b.min(tour.len.saturating_sub(1)) {
+            let f = x.frag_of(tour.get(&x.w, k).0);
+            x.w.set(self.pos + f, k as u32);
+        }
+    }
+
+    /// The position in the tour of the step that point `p` ends.
+    fn pos(&self, x: &Index<'_, '_>, p: usize) -> usize {
+        x.w.get(self.pos + x.frag_of(p)) as usize
+    }
+
+    /// `visit` the ends in the cells within `r` of `q` on the screen (at
+    /// most [`NEAR_RINGS`] rings of them), each counted against `budget`.
+    fn each_near(
+        &self,
+        x: &mut Index<'_, '_>,
+        m: Metric,
+        q: Packed,
+        r: f32,
+        mut visit: impl FnMut(&mut Index<'_, '_>, usize, &mut u64),
+        budget: &mut u64,
+    ) {
+        let Metric::Screen { view, shift, .. } = m else { return };
+        let s = Metric::at(&view, shift, q);
+        let [cx, cy] = self.coords(s);
+        let reach = ((r * self.scale) as usize + 1).min(NEAR_RINGS);
+        let (x0, x1) = (cx.saturating_sub(reach), (cx + reach).min(self.cells[0] - 1));
+        let (y0, y1) = (cy.saturating_sub(reach), (cy + reach).min(self.cells[1] - 1));
+        for y in y0..=y1 {
+            for xx in x0..=x1 {
+                let mut at = x.w.get(self.heads + xx + self.cells[0] * y);
+                while at != NONE && *budget > 0 {
+                    let p = at as usize;
+                    at = x.w.get(x.links + p);
+                    *budget = budget.saturating_sub(1);
+                    visit(x, p, budget);
+                }
+            }
         }
     }
 }
@@ -2003,6 +2350,87 @@ mod tests {
                 let st = chain(Source::one(&src), &mut dst, &mut scratch, [0; 3], 0.0, Pass::Order(metric));
                 proptest::prop_assert!(st.ordered);
                 proptest::prop_assert_eq!(drawn(&dst), drawn(&src));
+            }
+        }
+    }
+
+    /// The tour's length by its metric: from the start, each jump.
+    fn tour_length(tour: &Tour, x: &Index<'_, '_>, start: Packed) -> f32 {
+        let m = tour.metric;
+        let mut at: Option<Packed> = None;
+        let mut sum = 0.0;
+        for k in 0..tour.len {
+            let (e, o) = tour.ends(x, k);
+            sum += at.map_or_else(|| m.first_jump(start, e), |a| m.d(a, e));
+            at = Some(o);
+        }
+        sum
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(200))]
+        #[test]
+        fn improving_the_tour_never_lengthens_it_and_keeps_every_step(
+            frags in proptest::collection::vec(
+                (proptest::collection::vec([0u16..60, 0u16..60, 0u16..6], 1..5), 0u8..3),
+                8..60,
+            ),
+            start in [0u16..60, 0u16..60, 0u16..6],
+        ) {
+            // Dots, open polylines and loops scattered on a lattice, toured
+            // in the order given: the neighbours' moves (and, in space, the
+            // windowed ones) only shorten it, and every fragment stays once.
+            let mut p = store(512);
+            let mut src = Geometry::new(&mut p);
+            src.reset(0);
+            for (pts, kind) in &frags {
+                let first = match (pts.len(), kind) {
+                    (1, _) => Kind::Dot,
+                    (2, _) | (_, 0) => Kind::Move,
+                    _ => Kind::Loop,
+                };
+                for (n, &q) in pts.iter().enumerate() {
+                    src.push_raw(q, if n == 0 { first } else { Kind::Line });
+                }
+            }
+            for metric in metrics() {
+                let mut scratch = vec![0u8; 64 * 1024];
+                let mut x = Index::build(Source::one(&src), &mut scratch, true, false).expect("room");
+                x.relink(false);
+                let mut tour = Tour { base: x.tour_base(), len: 0, metric };
+                for f in 0..x.frags {
+                    let end = x.span(f).0;
+                    tour.push(&mut x, f, end);
+                }
+                for k in 0..tour.len - 1 {
+                    tour.measure(&mut x, k);
+                }
+                if matches!(metric, Metric::Screen { .. }) {
+                    proptest::prop_assert!(Near::build(&mut x, &tour).is_some(), "no neighbours");
+                }
+                let before = tour_length(&tour, &x, start);
+                tour.improve(&mut x, start);
+                let after = tour_length(&tour, &x, start);
+                proptest::prop_assert!(after <= before * 1.000_01 + 1e-3, "{after} > {before}");
+                // Each kind of move alone only shortens.
+                if let Some(near) = Near::build(&mut x, &tour) {
+                    let mut budget = SEARCH_BUDGET;
+                    tour.or_opt_near(&mut x, &near, &mut budget);
+                    let l1 = tour_length(&tour, &x, start);
+                    proptest::prop_assert!(l1 <= after * 1.000_01 + 1e-3, "or-opt: {l1} > {after}");
+                    tour.two_opt_near(&mut x, &near, &mut budget);
+                    let l2 = tour_length(&tour, &x, start);
+                    proptest::prop_assert!(l2 <= l1 * 1.000_01 + 1e-3, "2-opt: {l2} > {l1}");
+                }
+                let after = tour_length(&tour, &x, start);
+                // From a good tour too: a move is made only where it
+                // shortens.
+                tour.improve(&mut x, start);
+                let again = tour_length(&tour, &x, start);
+                proptest::prop_assert!(again <= after * 1.000_01 + 1e-3, "{again} > {after}");
+                let mut seen: Vec<usize> = (0..tour.len).map(|k| x.frag_of(tour.get(&x.w, k).0)).collect();
+                seen.sort_unstable();
+                proptest::prop_assert_eq!(seen, (0..x.frags).collect::<Vec<_>>());
             }
         }
     }
