@@ -11,13 +11,13 @@
 use criterion::{BenchmarkId, Criterion, Throughput, black_box, criterion_group, criterion_main};
 use isoscope_core::command::{Command, CommandSink, Point2, Point3};
 use isoscope_core::contour::contour_subgrid;
+use isoscope_core::contour::grid::{Plane, Planes, Volume};
+use isoscope_core::contour::pen::Placement;
+use isoscope_core::contour::subgrid::Subgrid;
+use isoscope_core::contour::surface::{SliceId, SurfaceSink, contour_volume};
+use isoscope_core::contour::trace::Traversal;
+use isoscope_core::contour::tree::Template;
 use isoscope_core::demo::Demo;
-use isoscope_core::grid::{Plane, Planes, Volume};
-use isoscope_core::pen::Placement;
-use isoscope_core::subgrid::Subgrid;
-use isoscope_core::surface::{SliceId, SurfaceSink, contour_volume};
-use isoscope_core::trace::Traversal;
-use isoscope_core::tree::Template;
 use std::convert::Infallible;
 use std::time::Duration;
 

@@ -11,7 +11,7 @@
 //! - [`Demo::Torus`]: the distance from a ring of radius 0.6 in the x-y
 //!   plane; level 0.25 is a torus of tube radius 0.25.
 
-use crate::grid::GridError;
+use crate::contour::grid::GridError;
 
 /// A built-in volume.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

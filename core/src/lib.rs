@@ -5,15 +5,19 @@
 //! 2x2 subgrids, zero-copy grid and volume views, and the chicken-wire
 //! contour surface of a volume.
 //!
-//! - [`subgrid`]: the five nodes and eight downhill edges of a 2x2 subgrid.
-//! - [`tree`]: the contouring trees of all 256 direction codes, built at
-//!   compile time.
-//! - [`trace`]: the paper's Figure 8 traversal (and its correction for nodes
-//!   at the level).
-//! - [`pen`]: placement of crossings and tidy drawing commands.
-//! - [`grid`]: [`grid::Grid2`] and [`grid::Volume`] views with strides.
-//! - [`contour`]: every subgrid of a grid, one or many levels.
-//! - [`surface`]: every slice of a volume along any planes.
+//! - [`contour`]: the contouring, bottom up:
+//!   - [`contour::subgrid`]: the five nodes and eight downhill edges of a
+//!     2x2 subgrid.
+//!   - [`contour::tree`]: the contouring trees of all 256 direction codes,
+//!     built at compile time.
+//!   - [`contour::trace`]: the paper's Figure 8 traversal (and its
+//!     correction for nodes at the level).
+//!   - [`contour::pen`]: placement of crossings and tidy drawing commands.
+//!   - [`contour::voxel`]: the sample types a grid may hold.
+//!   - [`contour::grid`]: [`contour::grid::Grid2`] and
+//!     [`contour::grid::Volume`] views with strides.
+//!   - [`contour`] itself: every subgrid of a grid, one or many levels.
+//!   - [`contour::surface`]: every slice of a volume along any planes.
 //! - [`command`]: `MoveTo / LineTo / Point` and the sink trait.
 //! - [`demo`]: built-in volumes (hydrogen 3d_xy orbital, gyroid, sphere,
 //!   torus).
@@ -38,8 +42,8 @@
 //! ```
 //! use isoscope_core::command::{Command, CommandSink, Point2};
 //! use isoscope_core::contour::contour_grid;
-//! use isoscope_core::grid::Grid2;
-//! use isoscope_core::trace::Traversal;
+//! use isoscope_core::contour::grid::Grid2;
+//! use isoscope_core::contour::trace::Traversal;
 //!
 //! /// A heap-free sink: the first 16 commands.
 //! struct First16 { cmds: [Option<Command<Point2>>; 16], n: usize }
@@ -82,18 +86,10 @@ pub mod dac;
 pub mod demo;
 pub mod engine;
 mod fastmath;
-pub mod grid;
 pub mod mock_dac;
 pub mod pace;
-pub mod pen;
-pub mod sample;
 pub mod screen;
 #[cfg(feature = "embedded-hal")]
 pub mod spi_dac;
-pub mod subgrid;
-pub mod surface;
-mod sweep;
-pub mod trace;
-pub mod tree;
 pub mod view;
 pub mod wire;

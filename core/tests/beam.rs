@@ -23,11 +23,11 @@
 use isoscope_core::beam::{BeamConfig, FrameStats, MIN_LIT_STEP, Park, Scheduler, frame_stats, park_samples};
 use isoscope_core::command::{Command, CommandSink, Point2};
 use isoscope_core::contour::contour_grid;
+use isoscope_core::contour::grid::Grid2;
+use isoscope_core::contour::trace::Traversal;
 use isoscope_core::dac::{Beam, Dac, Sample, SampleSource, Samples};
-use isoscope_core::grid::Grid2;
 use isoscope_core::mock_dac::{MockDac, MockDacError};
 use isoscope_core::screen::ScreenPoint;
-use isoscope_core::trace::Traversal;
 use proptest::prelude::*;
 use std::collections::HashMap;
 use std::convert::Infallible;

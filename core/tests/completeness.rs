@@ -11,10 +11,10 @@ mod common;
 use common::Log;
 use isoscope_core::command::{Command, Point2};
 use isoscope_core::contour::contour_grid;
-use isoscope_core::grid::Grid2;
-use isoscope_core::subgrid::{Edge, Node, Subgrid};
-use isoscope_core::trace::{Conn, Crossing, Traversal, visit};
-use isoscope_core::tree::Template;
+use isoscope_core::contour::grid::Grid2;
+use isoscope_core::contour::subgrid::{Edge, Node, Subgrid};
+use isoscope_core::contour::trace::{Conn, Crossing, Traversal, visit};
+use isoscope_core::contour::tree::Template;
 use std::collections::BTreeSet;
 
 /// A point snapped to 1e-6 grid units (all crossings here are rationals with

@@ -3,13 +3,13 @@
 //! being applied twice, and no input panics.
 
 use isoscope_core::command::{Command, Point3};
+use isoscope_core::contour::grid::{Planes, Volume};
+use isoscope_core::contour::surface::{SliceId, SurfaceSink, contour_slice, contour_volume};
+use isoscope_core::contour::trace::Traversal;
 use isoscope_core::demo::Demo;
 use isoscope_core::engine::{
     AbortReason, Buffers, Engine, EngineConfig, Event, Geometry, Packed, StaticBuffers,
 };
-use isoscope_core::grid::{Planes, Volume};
-use isoscope_core::surface::{SliceId, SurfaceSink, contour_slice, contour_volume};
-use isoscope_core::trace::Traversal;
 use isoscope_core::wire::{
     AXIS_X, AXIS_Y, AXIS_Z, DeviceState, FrameDecoder, Levels, MAX_CHUNK, Message, NackCode,
     PROTOCOL_VERSION, SampleType, encode,
@@ -264,9 +264,9 @@ fn batch(v: &Vol) -> Vec<Seg> {
     let vol = Volume::new(&v.values, nx, ny, nz).unwrap();
     let mut planes = Planes::NONE;
     for (bit, plane) in [
-        (AXIS_Z, isoscope_core::grid::Plane::XY),
-        (AXIS_Y, isoscope_core::grid::Plane::XZ),
-        (AXIS_X, isoscope_core::grid::Plane::YZ),
+        (AXIS_Z, isoscope_core::contour::grid::Plane::XY),
+        (AXIS_Y, isoscope_core::contour::grid::Plane::XZ),
+        (AXIS_X, isoscope_core::contour::grid::Plane::YZ),
     ] {
         if v.axes & bit != 0 {
             planes = planes.with(plane);

@@ -19,9 +19,9 @@
 mod common;
 use common::Log;
 use isoscope_core::command::{Command, Point2};
+use isoscope_core::contour::grid::Grid2;
+use isoscope_core::contour::trace::Traversal;
 use isoscope_core::contour::{ContourStats, contour_grid};
-use isoscope_core::grid::Grid2;
-use isoscope_core::trace::Traversal;
 
 fn show(c: &Command<Point2>) -> String {
     let p = c.point();

@@ -5,8 +5,8 @@ mod common;
 use common::Log;
 use isoscope_core::command::{Command, Point2};
 use isoscope_core::contour::contour_grid;
-use isoscope_core::grid::Grid2;
-use isoscope_core::trace::Traversal;
+use isoscope_core::contour::grid::Grid2;
+use isoscope_core::contour::trace::Traversal;
 
 /// Contour a single 2x2 subgrid whose lower-left grid point is `origin`
 /// (1-based) and render the commands as `S(x,y)` / `D(x,y)` / `P(x,y)`.

@@ -3,10 +3,10 @@
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use isoscope_core::beam::BeamConfig;
+use isoscope_core::contour::grid::{Plane, Volume};
+use isoscope_core::contour::trace::Traversal;
+use isoscope_core::contour::voxel::Sample;
 use isoscope_core::engine::Board;
-use isoscope_core::grid::{Plane, Volume};
-use isoscope_core::sample::Sample;
-use isoscope_core::trace::Traversal;
 use isoscope_core::view::{Projection, View};
 use isoscope_sim::animate::{AnimConfig, AnimFormat, animate};
 use isoscope_sim::board::frames_for;

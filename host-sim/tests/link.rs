@@ -3,11 +3,11 @@
 //! that loses and corrupts frames.
 
 use isoscope_core::command::{Command, Point3};
+use isoscope_core::contour::grid::{Planes, Volume};
+use isoscope_core::contour::surface::{SliceId, SurfaceSink, contour_volume};
+use isoscope_core::contour::trace::Traversal;
 use isoscope_core::demo::Demo;
 use isoscope_core::engine::{Engine, EngineConfig, Geometry};
-use isoscope_core::grid::{Planes, Volume};
-use isoscope_core::surface::{SliceId, SurfaceSink, contour_volume};
-use isoscope_core::trace::Traversal;
 use isoscope_sim::board::{HostBuffers, host_capacity};
 use isoscope_sim::link::{SendConfig, WireVolume, send_volume};
 use isoscope_sim::volume::{DemoSpec, LoadedVolume};

@@ -1,9 +1,9 @@
 //! Shared helpers of isoscope's cross-crate tests (the tests themselves are
 //! in `tests/`): build a demo volume and contour it with the host library.
 
+use isoscope_core::contour::grid::{Plane, Volume};
+use isoscope_core::contour::trace::Traversal;
 use isoscope_core::demo::Demo;
-use isoscope_core::grid::{Plane, Volume};
-use isoscope_core::trace::Traversal;
 use isoscope_sim::contour::{Contoured, Job, contour_volume};
 
 /// The `n`^3 samples of a built-in demo, x fastest.

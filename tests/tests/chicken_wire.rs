@@ -5,8 +5,8 @@
 //! the x-z slice through its y; an edge along y in an x-y and a y-z slice; an
 //! edge along z in an x-z and a y-z slice.
 
+use isoscope_core::contour::grid::Plane;
 use isoscope_core::demo::Demo;
-use isoscope_core::grid::Plane;
 use isoscope_sim::contour::Contoured;
 use isoscope_tests::contour_demo;
 use std::collections::HashSet;

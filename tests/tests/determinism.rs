@@ -1,8 +1,8 @@
 //! The host library's parallel contouring gives the same slices for any
 //! thread count.
 
+use isoscope_core::contour::grid::Plane;
 use isoscope_core::demo::Demo;
-use isoscope_core::grid::Plane;
 use isoscope_tests::contour_demo;
 
 fn check(demo: Demo, n: usize, levels: &[f32], planes: &[Plane]) {

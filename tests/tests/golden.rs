@@ -4,8 +4,8 @@
 //! Run with `ISOSCOPE_BLESS=1` to (re)write `golden/gyroid8.csv` after an
 //! intended change of the output.
 
+use isoscope_core::contour::grid::Plane;
 use isoscope_core::demo::Demo;
-use isoscope_core::grid::Plane;
 use isoscope_sim::contour::write_csv;
 use isoscope_tests::contour_demo;
 use std::path::PathBuf;

@@ -3,8 +3,8 @@
 //! that a change in any stage (contouring, view, display list, ordering,
 //! beam, phosphor) shows. `ISOSCOPE_BLESS=1` rewrites the references.
 
+use isoscope_core::contour::grid::Plane;
 use isoscope_core::demo::Demo;
-use isoscope_core::grid::Plane;
 use isoscope_sim::phosphor::PhosphorConfig;
 use isoscope_sim::scene::{SceneConfig, build, render};
 use isoscope_tests::{demo_wire, real_wire};

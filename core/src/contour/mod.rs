@@ -1,18 +1,45 @@
-//! Contouring a whole 2D grid: every 2x2 subgrid, one or many levels.
+//! Contouring: Zyda's contouring trees, from one 2x2 subgrid to the
+//! chicken-wire surface of a volume.
 //!
+//! Bottom up:
+//!
+//! - [`subgrid`]: the five nodes and eight downhill edges of a 2x2 subgrid.
+//! - [`tree`]: the contouring trees of all 256 direction codes, built at
+//!   compile time.
+//! - [`trace`]: the paper's Figure 8 traversal (and its correction for nodes
+//!   at the level).
+//! - [`pen`]: placement of crossings and tidy drawing commands.
+//! - [`voxel`]: the sample types a grid may hold.
+//! - [`grid`]: [`grid::Grid2`] and [`grid::Volume`] views with strides.
+//! - this module: a whole 2D grid (below); its inner loop over blocks of
+//!   cells is private (`sweep`).
+//! - [`surface`]: every slice of a volume along any planes.
+//!
+//! # A whole 2D grid
+//!
+//! Every 2x2 subgrid, one or many levels.
 //! Each subgrid's contouring trees are looked up once (they depend only on
 //! its direction code) and traversed for every level, the paper's point.
 //! Subgrids touching a NaN or infinite sample are skipped and counted.
 
+pub mod grid;
+pub mod pen;
+pub mod subgrid;
+pub mod surface;
+mod sweep;
+pub mod trace;
+pub mod tree;
+pub mod voxel;
+
 use crate::command::{Command, CommandSink};
-use crate::grid::{Grid2, GridError};
-use crate::pen::{Pen, Placed, Placement};
-use crate::sample::Sample;
-use crate::subgrid::Subgrid;
-use crate::sweep::{BLOCK, Scratch, Sweep, lane};
-use crate::trace::{Conn, Crossing, Traversal, visit};
-use crate::tree::Template;
 use core::ops::Range;
+use grid::{Grid2, GridError};
+use pen::{Pen, Placed, Placement};
+use subgrid::Subgrid;
+use sweep::{BLOCK, Scratch, Sweep, lane};
+use trace::{Conn, Crossing, Traversal, visit};
+use tree::Template;
+use voxel::Sample;
 
 /// Why contouring stopped.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

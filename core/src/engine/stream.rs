@@ -6,7 +6,7 @@
 //! (one per `y`) and every y-z slice (one per `x`). Together these are all
 //! the subgrids of the whole chicken-wire surface, with commands and
 //! coordinates bit-identical to contouring the whole volume at once
-//! ([`crate::surface::contour_volume`]); only their order differs.
+//! ([`crate::contour::surface::contour_volume`]); only their order differs.
 //!
 //! That work is a [`Job`] of rows of subgrids (about `3 n` for an `n x n`
 //! slice), done at once when the slice completes or, deferred, a few rows
@@ -17,8 +17,8 @@
 use super::chain;
 use super::geometry::{Geometry, Held};
 use crate::command::{Command, CommandSink, Point3};
+use crate::contour::trace::Traversal;
 use crate::contour::{ContourStats, RowContourer};
-use crate::trace::Traversal;
 use crate::wire::{AXIS_X, AXIS_Y, AXIS_Z, Levels, NackCode, SampleType};
 use core::convert::Infallible;
 

@@ -17,12 +17,12 @@
 //! and below every level) into bits, 32 cells a word, and the marked cells
 //! are the words' zero bits.
 
+use super::pen::Placement;
+use super::subgrid::Subgrid;
+use super::trace::Traversal;
+use super::voxel::Sample;
+use super::{ContourStats, contour_subgrid};
 use crate::command::CommandSink;
-use crate::contour::{ContourStats, contour_subgrid};
-use crate::pen::Placement;
-use crate::sample::Sample;
-use crate::subgrid::Subgrid;
-use crate::trace::Traversal;
 
 /// Cells per block. The scratch space is about 17 bytes per cell (2.2 KiB
 /// of stack).

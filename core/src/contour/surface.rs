@@ -5,13 +5,13 @@
 //! volume edge is bit-identical whichever slice (and subgrid) draws it, so the
 //! x-y, x-z and y-z contours meet exactly.
 
+use super::grid::{Plane, Planes, Volume};
+use super::pen::Placement;
+use super::sweep::{BLOCK, Scratch, Sweep, lane};
+use super::trace::Traversal;
+use super::voxel::Sample;
+use super::{ContourError, ContourStats, check_levels, contour_grid, contour_rows};
 use crate::command::{Command, CommandSink, Point3};
-use crate::contour::{ContourError, ContourStats, check_levels, contour_grid, contour_rows};
-use crate::grid::{Plane, Planes, Volume};
-use crate::pen::Placement;
-use crate::sample::Sample;
-use crate::sweep::{BLOCK, Scratch, Sweep, lane};
-use crate::trace::Traversal;
 use core::ops::Range;
 
 /// One slice of a volume.

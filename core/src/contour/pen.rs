@@ -8,9 +8,9 @@
 //! dropped when a line of the same subgrid already passes through it, or when
 //! it was already drawn.
 
+use super::subgrid::{Edge, Node, Subgrid};
+use super::trace::{Conn, Crossing};
 use crate::command::Command;
-use crate::subgrid::{Edge, Node, Subgrid};
-use crate::trace::{Conn, Crossing};
 
 /// Bit of a crossing in a 13-bit mask.
 #[inline(always)]

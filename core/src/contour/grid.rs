@@ -3,7 +3,7 @@
 //! A [`Grid2`] addresses its samples through strides, so every x-y, x-z and
 //! y-z slice of a [`Volume`] is contoured in place, without copying.
 
-use crate::sample::Sample;
+use super::voxel::Sample;
 
 /// Largest extent along one axis: grid coordinates are `f32`, exact for
 /// integers up to 2^24.

@@ -17,10 +17,11 @@
 //!
 //! A tree depends only on the [`DirectionCode`], never on the level, so the
 //! [`TEMPLATES`] table is computed once by `const fn` and lives in flash on the
-//! MCU (see [`TEMPLATE_TABLE_BYTES`]). Traversal is in [`crate::trace`].
+//! MCU (see [`TEMPLATE_TABLE_BYTES`]). Traversal is in
+//! [`crate::contour::trace`].
 
-use crate::subgrid::{DirectionCode, Edge, Node};
-use crate::trace::Crossing;
+use super::subgrid::{DirectionCode, Edge, Node};
+use super::trace::Crossing;
 
 /// Most trees in one subgrid (two, for a saddle).
 pub const MAX_TREES: usize = 2;
@@ -364,7 +365,7 @@ pub const TEMPLATE_TABLE_BYTES: usize = core::mem::size_of::<[Template; 256]>();
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::subgrid::Subgrid;
+    use crate::contour::subgrid::Subgrid;
     use std::collections::BTreeSet;
 
     /// The construction written again, independently: angles by `atan2`,

@@ -1,7 +1,7 @@
 //! Traversal of contouring trees (Zyda, Figure 8) for one level.
 
-use crate::subgrid::{Edge, Node, Subgrid};
-use crate::tree::{Entry, Template};
+use super::subgrid::{Edge, Node, Subgrid};
+use super::tree::{Entry, Template};
 
 /// The paper's drawing instruction on a tree node.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
