@@ -13,7 +13,8 @@
 //!   - [`contour::trace`]: the paper's Figure 8 traversal (and its
 //!     correction for nodes at the level).
 //!   - [`contour::pen`]: placement of crossings and tidy drawing commands.
-//!   - [`contour::voxel`]: the sample types a grid may hold.
+//!   - [`contour::voxel`]: the sample types a grid may hold
+//!     ([`contour::Voxel`]).
 //!   - [`contour::grid`]: [`contour::grid::Grid2`] and
 //!     [`contour::grid::Volume`] views with strides.
 //!   - [`contour`] itself: every subgrid of a grid, one or many levels.

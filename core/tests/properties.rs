@@ -20,12 +20,12 @@
 mod common;
 use common::Log;
 use isoscope_core::command::{Command, Point2, Point3};
+use isoscope_core::contour::Voxel;
 use isoscope_core::contour::grid::{Grid2, GridError, Plane, Planes, Volume};
 use isoscope_core::contour::pen::Placement;
 use isoscope_core::contour::subgrid::Subgrid;
 use isoscope_core::contour::surface::{SliceId, SurfaceSink, contour_volume};
 use isoscope_core::contour::trace::Traversal;
-use isoscope_core::contour::voxel::Sample;
 use isoscope_core::contour::{ContourError, ContourStats, contour_grid, contour_subgrid};
 use proptest::prelude::*;
 use proptest::sample::Index;
@@ -221,7 +221,7 @@ impl Run {
     }
 }
 
-fn run_typed<T: Sample>(data: &[T], nx: usize, ny: usize, levels: &[f32], traversal: Traversal) -> Run {
+fn run_typed<T: Voxel>(data: &[T], nx: usize, ny: usize, levels: &[f32], traversal: Traversal) -> Run {
     let grid = Grid2::new(data, nx, ny).unwrap();
     let mut log = Log::default();
     let stats = contour_grid(&grid, levels, traversal, Point2::new, &mut log).unwrap();
@@ -607,7 +607,7 @@ proptest! {
     }
 }
 
-fn run_volume<T: Sample>(
+fn run_volume<T: Voxel>(
     data: &[T],
     (nx, ny, nz): (usize, usize, usize),
     levels: &[f32],

@@ -8,10 +8,10 @@ use crate::progress::Progress;
 use anyhow::{Context, Result, anyhow};
 use isoscope_core::command::{Command, Point3};
 use isoscope_core::contour::ContourStats;
+use isoscope_core::contour::Voxel;
 use isoscope_core::contour::grid::{Plane, Volume};
 use isoscope_core::contour::surface::{SliceId, SurfaceSink, band_rows, contour_band, contour_slice};
 use isoscope_core::contour::trace::Traversal;
-use isoscope_core::contour::voxel::Sample;
 use std::convert::Infallible;
 use std::io::Write;
 use std::sync::Mutex;
@@ -91,7 +91,7 @@ struct Band {
 
 /// Rows per band: small enough to balance the threads, large enough that
 /// a band is worth a task.
-fn bands<T: Sample>(volume: &Volume<'_, T>, planes: &[Plane], threads: usize, every: usize) -> Vec<Band> {
+fn bands<T: Voxel>(volume: &Volume<'_, T>, planes: &[Plane], threads: usize, every: usize) -> Vec<Band> {
     let mut out = vec![];
     if every > 1 {
         for &plane in planes {
@@ -116,7 +116,7 @@ fn bands<T: Sample>(volume: &Volume<'_, T>, planes: &[Plane], threads: usize, ev
 /// Contour every slice of the job's planes on `job.threads` threads. The
 /// result is the same for any thread count: each slice's commands in
 /// row-major cell order, slices in plane and index order.
-pub fn contour_volume<T: Sample + Sync>(
+pub fn contour_volume<T: Voxel + Sync>(
     volume: &Volume<'_, T>,
     job: &Job<'_>,
     progress: Option<&Progress>,
@@ -197,7 +197,7 @@ pub fn contour_volume<T: Sample + Sync>(
 
 /// The number of work units [`contour_volume`] splits a job into (for
 /// progress reporting).
-pub fn work_units<T: Sample>(volume: &Volume<'_, T>, job: &Job<'_>) -> usize {
+pub fn work_units<T: Voxel>(volume: &Volume<'_, T>, job: &Job<'_>) -> usize {
     bands(volume, job.planes, job.threads.max(1), job.every.max(1)).len()
 }
 

@@ -3,9 +3,9 @@
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use isoscope_core::beam::BeamConfig;
+use isoscope_core::contour::Voxel;
 use isoscope_core::contour::grid::{Plane, Volume};
 use isoscope_core::contour::trace::Traversal;
-use isoscope_core::contour::voxel::Sample;
 use isoscope_core::engine::Board;
 use isoscope_core::view::{Projection, View};
 use isoscope_sim::animate::{AnimConfig, AnimFormat, animate};
@@ -491,7 +491,7 @@ fn contour(args: &ContourArgs) -> Result<()> {
         bail!("--every must be at least 1");
     }
     let Dims(nx, ny, nz) = vol.dims;
-    fn run<T: Sample + Sync>(
+    fn run<T: Voxel + Sync>(
         data: &[T],
         d: (usize, usize, usize),
         job: &Job<'_>,

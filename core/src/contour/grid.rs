@@ -3,7 +3,7 @@
 //! A [`Grid2`] addresses its samples through strides, so every x-y, x-z and
 //! y-z slice of a [`Volume`] is contoured in place, without copying.
 
-use super::voxel::Sample;
+use super::voxel::Voxel;
 
 /// Largest extent along one axis: grid coordinates are `f32`, exact for
 /// integers up to 2^24.
@@ -90,7 +90,7 @@ pub struct Grid2<'a, T> {
     sy: usize,
 }
 
-impl<'a, T: Sample> Grid2<'a, T> {
+impl<'a, T: Voxel> Grid2<'a, T> {
     /// A contiguous grid, x fastest: `data.len()` must be `nx * ny`.
     ///
     /// # Errors
@@ -269,7 +269,7 @@ pub struct Volume<'a, T> {
     nz: usize,
 }
 
-impl<'a, T: Sample> Volume<'a, T> {
+impl<'a, T: Voxel> Volume<'a, T> {
     /// A volume over `data`, which must hold exactly `nx * ny * nz` samples.
     ///
     /// # Errors

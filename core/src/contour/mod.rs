@@ -9,7 +9,7 @@
 //! - [`trace`]: the paper's Figure 8 traversal (and its correction for nodes
 //!   at the level).
 //! - [`pen`]: placement of crossings and tidy drawing commands.
-//! - [`voxel`]: the sample types a grid may hold.
+//! - [`voxel`]: the sample types a grid may hold, the [`Voxel`] trait.
 //! - [`grid`]: [`grid::Grid2`] and [`grid::Volume`] views with strides.
 //! - this module: a whole 2D grid (below); its inner loop over blocks of
 //!   cells is private (`sweep`).
@@ -31,6 +31,8 @@ pub mod trace;
 pub mod tree;
 pub mod voxel;
 
+pub use voxel::Voxel;
+
 use crate::command::{Command, CommandSink};
 use core::ops::Range;
 use grid::{Grid2, GridError};
@@ -39,7 +41,6 @@ use subgrid::Subgrid;
 use sweep::{BLOCK, Scratch, Sweep, lane};
 use trace::{Conn, Crossing, Traversal, visit};
 use tree::Template;
-use voxel::Sample;
 
 /// Why contouring stopped.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -237,7 +238,7 @@ impl<'l> RowContourer<'l> {
 /// # Errors
 /// [`ContourError::NonFiniteLevel`] before anything is drawn, or the sink's
 /// error.
-pub fn contour_grid<T: Sample, P, S: CommandSink<P>>(
+pub fn contour_grid<T: Voxel, P, S: CommandSink<P>>(
     grid: &Grid2<'_, T>,
     levels: &[f32],
     traversal: Traversal,
@@ -254,7 +255,7 @@ pub fn contour_grid<T: Sample, P, S: CommandSink<P>>(
 /// # Errors
 /// [`ContourError::NonFiniteLevel`] before anything is drawn, or the sink's
 /// error.
-pub fn contour_rows<T: Sample, P, S: CommandSink<P>>(
+pub fn contour_rows<T: Voxel, P, S: CommandSink<P>>(
     grid: &Grid2<'_, T>,
     rows: Range<usize>,
     levels: &[f32],

@@ -9,7 +9,7 @@ use super::grid::{Plane, Planes, Volume};
 use super::pen::Placement;
 use super::sweep::{BLOCK, Scratch, Sweep, lane};
 use super::trace::Traversal;
-use super::voxel::Sample;
+use super::voxel::Voxel;
 use super::{ContourError, ContourStats, check_levels, contour_grid, contour_rows};
 use crate::command::{Command, CommandSink, Point3};
 use core::ops::Range;
@@ -63,7 +63,7 @@ impl<S: SurfaceSink> CommandSink<Point3> for SliceSink<'_, S> {
 /// # Errors
 /// [`ContourError::Grid`] for a slice index out of range,
 /// [`ContourError::NonFiniteLevel`], or the sink's error.
-pub fn contour_slice<T: Sample, S: SurfaceSink>(
+pub fn contour_slice<T: Voxel, S: SurfaceSink>(
     volume: &Volume<'_, T>,
     slice: SliceId,
     levels: &[f32],
@@ -80,7 +80,7 @@ pub fn contour_slice<T: Sample, S: SurfaceSink>(
 /// The number of cell rows of `plane`'s slices (along the slice's second
 /// axis: y for XY, z for XZ and YZ); bands passed to [`contour_band`] index
 /// these rows.
-pub fn band_rows<T: Sample>(volume: &Volume<'_, T>, plane: Plane) -> usize {
+pub fn band_rows<T: Voxel>(volume: &Volume<'_, T>, plane: Plane) -> usize {
     let (_, ny, nz) = volume.dims();
     match plane {
         Plane::XY => ny - 1,
@@ -100,7 +100,7 @@ pub fn band_rows<T: Sample>(volume: &Volume<'_, T>, plane: Plane) -> usize {
 /// # Errors
 /// [`ContourError::NonFiniteLevel`] before anything is drawn, or the sink's
 /// error. Rows past the end are ignored.
-pub fn contour_band<T: Sample, S: SurfaceSink>(
+pub fn contour_band<T: Voxel, S: SurfaceSink>(
     volume: &Volume<'_, T>,
     plane: Plane,
     rows: Range<usize>,
@@ -184,7 +184,7 @@ impl<S: SurfaceSink> CommandSink<(usize, Point3)> for LaneSink<'_, S> {
 /// # Errors
 /// [`ContourError::NonFiniteLevel`] before anything is drawn, or the sink's
 /// error.
-pub fn contour_volume<T: Sample, S: SurfaceSink>(
+pub fn contour_volume<T: Voxel, S: SurfaceSink>(
     volume: &Volume<'_, T>,
     planes: Planes,
     levels: &[f32],

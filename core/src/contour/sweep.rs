@@ -20,7 +20,7 @@
 use super::pen::Placement;
 use super::subgrid::Subgrid;
 use super::trace::Traversal;
-use super::voxel::Sample;
+use super::voxel::Voxel;
 use super::{ContourStats, contour_subgrid};
 use crate::command::CommandSink;
 
@@ -33,7 +33,7 @@ pub(crate) const BLOCK: usize = 128;
 /// (NaN past the end of `data`; the callers' views are checked, so that does
 /// not happen).
 #[inline(always)]
-pub(crate) fn lane<'a, T: Sample>(
+pub(crate) fn lane<'a, T: Voxel>(
     data: &'a [T],
     start: usize,
     stride: usize,

@@ -1,13 +1,14 @@
-//! Sample types a grid may hold.
+//! Voxels: the sample types a grid may hold.
 //!
 //! Real data comes in several widths: CT scans are `i16`, MRI is often `u8`,
 //! electron microscopy and simulations `f32`. Every sample is widened to `f32`
 //! for contouring; the integer types convert exactly (all are below 2^24).
 
-/// A scalar grid sample that can be contoured.
+/// A voxel: a scalar grid sample that can be contoured (not to be confused
+/// with a DAC's [`Sample`](crate::dac::Sample)).
 ///
 /// Sealed: the core implements it for `u8`, `u16`, `i16` and `f32`.
-pub trait Sample: Copy + sealed::Sealed {
+pub trait Voxel: Copy + sealed::Sealed {
     /// The sample as an `f32` (exact for the integer types).
     fn to_f32(self) -> f32;
 
@@ -27,28 +28,28 @@ mod sealed {
     impl Sealed for f32 {}
 }
 
-impl Sample for u8 {
+impl Voxel for u8 {
     #[inline(always)]
     fn to_f32(self) -> f32 {
         f32::from(self)
     }
 }
 
-impl Sample for u16 {
+impl Voxel for u16 {
     #[inline(always)]
     fn to_f32(self) -> f32 {
         f32::from(self)
     }
 }
 
-impl Sample for i16 {
+impl Voxel for i16 {
     #[inline(always)]
     fn to_f32(self) -> f32 {
         f32::from(self)
     }
 }
 
-impl Sample for f32 {
+impl Voxel for f32 {
     #[inline(always)]
     fn to_f32(self) -> f32 {
         self
