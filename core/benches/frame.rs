@@ -16,9 +16,9 @@
 //! instructions go.
 
 use criterion::{Criterion, Throughput, black_box, criterion_group, criterion_main};
-use isoscope_core::dac::Sample;
 use isoscope_core::demo::Demo;
 use isoscope_core::engine::{Engine, EngineConfig, Geometry, StaticBuffers};
+use isoscope_core::output::Sample;
 use isoscope_core::wire::{AXIS_X, AXIS_Y, AXIS_Z, Levels, MAX_CHUNK, Message, SampleType, encode};
 
 const SIDE: usize = 16;

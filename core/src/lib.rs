@@ -27,8 +27,10 @@
 //! - [`beam`]: the beam scheduler (display list to DAC samples) and frame
 //!   statistics.
 //! - [`pace`]: slowing the sample clock to what the refill keeps up with.
-//! - [`dac`]: the `Dac` trait; [`mock_dac`]: a heap-free mock with ASCII
-//!   art; `spi_dac` (feature `embedded-hal`): the MCP4922.
+//! - [`output`]: the DAC samples and the [`output::Dac`] trait every DAC
+//!   implements:
+//!   - [`output::mock`]: a heap-free mock with ASCII art;
+//!   - `output::mcp4922` (feature `embedded-hal`): the MCP4922 SPI DAC.
 //! - [`engine`]: the device engine behind the UART, and the one picture
 //!   pipeline of every board and host command: streaming volumes slice by
 //!   slice, cull, stitch, merge and order in 3D in bounded memory, a
@@ -83,14 +85,11 @@
 pub mod beam;
 pub mod command;
 pub mod contour;
-pub mod dac;
 pub mod demo;
 pub mod engine;
 mod fastmath;
-pub mod mock_dac;
+pub mod output;
 pub mod pace;
 pub mod screen;
-#[cfg(feature = "embedded-hal")]
-pub mod spi_dac;
 pub mod view;
 pub mod wire;

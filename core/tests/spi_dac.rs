@@ -13,10 +13,10 @@ use embedded_hal::spi::{self, ErrorKind, Operation, SpiDevice};
 use embedded_hal_mock::eh1::MockError;
 use embedded_hal_mock::eh1::digital::{Mock as PinMock, State, Transaction as PinTx};
 use embedded_hal_mock::eh1::spi::{Mock as SpiMock, Transaction as SpiTx};
-use isoscope_core::dac::{Beam, Dac, Sample};
-use isoscope_core::spi_dac::{
+use isoscope_core::output::mcp4922::{
     Channel, Config, Gain, MAX_CODE, Mcp4922, NoPin, SpiDacError, VrefBuffer, ZPolarity,
 };
+use isoscope_core::output::{Beam, Dac, Sample};
 
 const ON: Beam = Beam::On;
 const OFF: Beam = Beam::Off;

@@ -74,7 +74,7 @@
 use crate::serial::{self, Rx, Tx};
 use core::cell::UnsafeCell;
 use core::sync::atomic::{Ordering, compiler_fence};
-use isoscope_core::dac::{Beam, Dac, Sample, SampleSource, Samples};
+use isoscope_core::output::{Beam, Dac, Sample, SampleSource, Samples};
 use stm32f4xx_hal::gpio::{Alternate, Analog, Output, PinState, PushPull, gpioa, gpiob};
 use stm32f4xx_hal::pac;
 use stm32f4xx_hal::prelude::*;
@@ -435,7 +435,7 @@ mod cpu {
     //! the blank pin.
 
     use super::{DmaError, Filled, HALF, Out, write_slots};
-    use isoscope_core::dac::{Beam, SampleSource, Samples};
+    use isoscope_core::output::{Beam, SampleSource, Samples};
 
     /// The running output.
     pub struct Streaming {
@@ -526,7 +526,7 @@ mod dma {
         MIN_SAMPLE_RATE_HZ, Out, SAMPLE_RATE_HZ, XY, pac, write_slots,
     };
     use core::sync::atomic::{AtomicU8, AtomicU32, Ordering};
-    use isoscope_core::dac::{Beam, SampleSource, Samples};
+    use isoscope_core::output::{Beam, SampleSource, Samples};
     use isoscope_core::pace::{self, PaceConfig, Pacer};
     use stm32f4xx_hal::interrupt;
 

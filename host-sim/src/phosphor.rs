@@ -76,7 +76,7 @@
 //! # Example
 //!
 //! ```
-//! use isoscope_core::dac::{Beam, Sample};
+//! use isoscope_core::output::{Beam, Sample};
 //! use isoscope_sim::phosphor::{Phosphor, PhosphorConfig};
 //!
 //! let mut screen = Phosphor::new(PhosphorConfig::with_size(64, 64)).unwrap();
@@ -88,7 +88,7 @@
 //! assert_eq!(&png[1..4], b"PNG");
 //! ```
 
-use isoscope_core::dac::{Beam, Dac, Sample};
+use isoscope_core::output::{Beam, Dac, Sample};
 use std::convert::Infallible;
 use std::fmt;
 use std::fs::File;

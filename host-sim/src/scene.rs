@@ -17,8 +17,8 @@ use anyhow::{Context, Result, bail};
 use isoscope_core::beam::{BeamConfig, FrameStats};
 use isoscope_core::command::Command;
 use isoscope_core::contour::grid::Plane;
-use isoscope_core::dac::Sample as DacSample;
 use isoscope_core::engine::{Board, Capacity, ChainStats, EngineConfig};
+use isoscope_core::output::Sample;
 use isoscope_core::screen::ScreenPoint;
 use isoscope_core::view::View;
 use isoscope_core::wire::{AXIS_X, AXIS_Y, AXIS_Z, MAX_CHUNK, NackCode};
@@ -140,7 +140,7 @@ pub const HOST_MAX_POINTS: usize = 1 << 24;
 pub struct Scene {
     /// One frame's DAC samples, from the park position back to it, as the
     /// board plays them over and over.
-    pub samples: Vec<DacSample>,
+    pub samples: Vec<Sample>,
     /// The picture's drawing commands on the screen, in drawing order.
     pub commands: Vec<Command<ScreenPoint>>,
     /// The frame's statistics.
@@ -231,7 +231,7 @@ pub fn build(vol: &WireVolume, cfg: &SceneConfig) -> Result<Scene> {
 pub fn scene_of(board: &InProcess<'_>, capacity: Capacity, cfg: &SceneConfig) -> Scene {
     let engine = board.engine();
     let mut frame = engine.frame();
-    let samples: Vec<DacSample> = frame.by_ref().collect();
+    let samples: Vec<Sample> = frame.by_ref().collect();
     let surface = engine.surface();
     Scene {
         samples,
@@ -336,8 +336,8 @@ impl Scene {
 ///
 /// # Errors
 /// The file cannot be written.
-pub fn write_samples(samples: &[DacSample], path: &std::path::Path) -> Result<()> {
-    use isoscope_core::dac::Beam;
+pub fn write_samples(samples: &[Sample], path: &std::path::Path) -> Result<()> {
+    use isoscope_core::output::Beam;
     use std::fmt::Write as _;
     let mut text = String::with_capacity(samples.len() * 12);
     for s in samples {

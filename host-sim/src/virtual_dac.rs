@@ -2,7 +2,7 @@
 //! clock, for the phosphor rasteriser and for tests. It implements the same
 //! [`Dac`] trait as the firmware's DACs.
 
-use isoscope_core::dac::{Beam, Dac, Sample};
+use isoscope_core::output::{Beam, Dac, Sample};
 use std::convert::Infallible;
 
 /// A DAC that keeps what it is given.

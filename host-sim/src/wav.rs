@@ -76,7 +76,7 @@
 //! a DC-coupled interface (or one modified to be).
 //!
 //! ```
-//! use isoscope_core::dac::{Beam, Sample};
+//! use isoscope_core::output::{Beam, Sample};
 //! use isoscope_sim::wav::{WavChannels, WavConfig, write_wav};
 //!
 //! let frame = [Sample::new(0, 0, Beam::On), Sample::new(4095, 4095, Beam::Off)];
@@ -87,7 +87,7 @@
 //! ```
 
 use isoscope_core::beam::{BeamConfig, MIN_LIT_STEP};
-use isoscope_core::dac::{Beam, Sample};
+use isoscope_core::output::{Beam, Sample};
 use std::fmt;
 use std::fs::File;
 use std::io::{BufWriter, Seek, Write};

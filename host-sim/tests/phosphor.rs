@@ -2,8 +2,8 @@
 //! pipeline (the board's engine in process, its beam scheduler) into a
 //! [`Phosphor`] used as the DAC.
 
-use isoscope_core::dac::{Beam, Dac, Sample};
 use isoscope_core::demo::Demo;
+use isoscope_core::output::{Beam, Dac, Sample};
 use isoscope_sim::link::WireVolume;
 use isoscope_sim::phosphor::{Phosphor, PhosphorConfig};
 use isoscope_sim::scene::{SceneConfig, build};

@@ -105,7 +105,7 @@
 //! ```
 //! use isoscope_core::beam::{BeamConfig, Park, Scheduler};
 //! use isoscope_core::command::Command;
-//! use isoscope_core::dac::{Beam, Sample};
+//! use isoscope_core::output::{Beam, Sample};
 //! use isoscope_core::screen::ScreenPoint;
 //!
 //! let cfg = BeamConfig {
@@ -135,8 +135,8 @@
 //! ```
 
 use crate::command::Command;
-use crate::dac::{Beam, Sample, SampleSource};
 use crate::fastmath::{ceil, sqrt};
+use crate::output::{Beam, Sample, SampleSource};
 use crate::screen::ScreenPoint;
 
 /// The smallest accepted [`BeamConfig::lit_step`], in LSB per sample.

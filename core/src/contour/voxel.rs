@@ -5,7 +5,7 @@
 //! for contouring; the integer types convert exactly (all are below 2^24).
 
 /// A voxel: a scalar grid sample that can be contoured (not to be confused
-/// with a DAC's [`Sample`](crate::dac::Sample)).
+/// with a DAC's [`Sample`](crate::output::Sample)).
 ///
 /// Sealed: the core implements it for `u8`, `u16`, `i16` and `f32`.
 pub trait Voxel: Copy + sealed::Sealed {

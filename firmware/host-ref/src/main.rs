@@ -35,7 +35,7 @@
 //! sample; BSRR writes before the first DHR12RD (setting up the pin) must
 //! leave the beam blanked.
 
-use isoscope_core::dac::{Beam, Sample};
+use isoscope_core::output::{Beam, Sample};
 use isoscope_core::demo::Demo;
 use isoscope_core::engine::{Engine, Event, StaticBuffers};
 use isoscope_core::wire::{

@@ -90,8 +90,8 @@
 //! ```
 //! use embedded_hal_mock::eh1::digital::{Mock as PinMock, State, Transaction as PinTx};
 //! use embedded_hal_mock::eh1::spi::{Mock as SpiMock, Transaction as SpiTx};
-//! use isoscope_core::dac::{Beam, Dac, Sample};
-//! use isoscope_core::spi_dac::{Config, Mcp4922, NoPin};
+//! use isoscope_core::output::{Beam, Dac, Sample};
+//! use isoscope_core::output::mcp4922::{Config, Mcp4922, NoPin};
 //!
 //! let spi = SpiMock::new(&[
 //!     SpiTx::transaction_start(), SpiTx::write_vec(vec![0x30, 0x00]), SpiTx::transaction_end(),
@@ -116,7 +116,7 @@ use core::marker::PhantomData;
 use embedded_hal::digital::{self, ErrorType, OutputPin};
 use embedded_hal::spi::{self, SpiDevice};
 
-use crate::dac::{Beam, Dac, Sample};
+use super::{Beam, Dac, Sample};
 
 /// Resolution of the MCP4922, in bits (the beam scheduler's `bits`).
 pub const BITS: u8 = 12;
@@ -233,7 +233,7 @@ impl Config {
     /// (only the low 12 bits of `code` are used).
     ///
     /// ```
-    /// use isoscope_core::spi_dac::{Channel, Config, Gain, VrefBuffer};
+    /// use isoscope_core::output::mcp4922::{Channel, Config, Gain, VrefBuffer};
     ///
     /// assert_eq!(Config::new().command_word(Channel::A, 0x123), 0x3123);
     /// assert_eq!(Config::new().command_word(Channel::B, 0xABC), 0xBABC);

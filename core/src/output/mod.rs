@@ -5,6 +5,15 @@
 //! one required method taking an iterator of samples. The STM32's on-chip
 //! DACs, an SPI DAC, the host's virtual DAC and the heap-free `MockDac` all
 //! implement it.
+//!
+//! - `mcp4922` (feature `embedded-hal`): the MCP4922 dual SPI DAC and a Z
+//!   pin, over embedded-hal 1.0.
+//! - [`mock`]: [`mock::MockDac`], a heap-free DAC that draws ASCII art, for
+//!   tests.
+
+#[cfg(feature = "embedded-hal")]
+pub mod mcp4922;
+pub mod mock;
 
 /// Whether the beam is lit for a sample (the Z / blank output).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]

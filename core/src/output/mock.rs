@@ -13,8 +13,8 @@
 //! each code is one column.
 //!
 //! ```
-//! use isoscope_core::dac::{Beam, Dac, Sample};
-//! use isoscope_core::mock_dac::MockDac;
+//! use isoscope_core::output::{Beam, Dac, Sample};
+//! use isoscope_core::output::mock::MockDac;
 //!
 //! let mut dac = MockDac::<4, 2>::new(2); // codes 0..=3: one column each, two codes a row
 //! dac.write([Sample::new(0, 0, Beam::On), Sample::new(3, 3, Beam::On)]).unwrap();
@@ -24,7 +24,7 @@
 //! ]);
 //! ```
 
-use crate::dac::{Beam, Dac, Sample};
+use super::{Beam, Dac, Sample};
 
 /// Why the [`MockDac`] refused a sample.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
