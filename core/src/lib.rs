@@ -22,8 +22,9 @@
 //! - [`command`]: `MoveTo / LineTo / Point` and the sink trait.
 //! - [`demo`]: built-in volumes (hydrogen 3d_xy orbital, gyroid, sphere,
 //!   torus).
-//! - [`view`]: 3D view, projection and auto-fit to the DAC range.
-//! - [`screen`]: points in DAC units.
+//! - [`view`]: 3D view, projection and auto-fit to the DAC range
+//!   ([`view::ViewTransform`]), onto points in DAC units
+//!   ([`view::ScreenPoint`]).
 //! - [`beam`]: the beam scheduler (display list to DAC samples) and frame
 //!   statistics.
 //! - [`pace`]: slowing the sample clock to what the refill keeps up with.
@@ -90,6 +91,5 @@ pub mod engine;
 mod fastmath;
 pub mod output;
 pub mod pace;
-pub mod screen;
 pub mod view;
 pub mod wire;

@@ -27,7 +27,7 @@ use isoscope_core::contour::grid::Grid2;
 use isoscope_core::contour::trace::Traversal;
 use isoscope_core::output::mock::{MockDac, MockDacError};
 use isoscope_core::output::{Beam, Dac, Sample, SampleSource, Samples};
-use isoscope_core::screen::ScreenPoint;
+use isoscope_core::view::ScreenPoint;
 use proptest::prelude::*;
 use std::collections::HashMap;
 use std::convert::Infallible;

@@ -1267,7 +1267,7 @@ mod tests {
         // Straight from the beam scheduler.
         use isoscope_core::beam::{BeamConfig, Scheduler};
         use isoscope_core::command::Command;
-        use isoscope_core::screen::ScreenPoint;
+        use isoscope_core::view::ScreenPoint;
         p.clear();
         let cmds = [
             Command::MoveTo(ScreenPoint::new(500.0, 500.0)),

@@ -19,8 +19,7 @@ use isoscope_core::command::Command;
 use isoscope_core::contour::grid::Plane;
 use isoscope_core::engine::{Board, Capacity, ChainStats, EngineConfig};
 use isoscope_core::output::Sample;
-use isoscope_core::screen::ScreenPoint;
-use isoscope_core::view::View;
+use isoscope_core::view::{ScreenPoint, View};
 use isoscope_core::wire::{AXIS_X, AXIS_Y, AXIS_Z, MAX_CHUNK, NackCode};
 
 /// How much memory the engine gets.

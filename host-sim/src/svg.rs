@@ -4,7 +4,7 @@
 //! like the scope.
 
 use isoscope_core::command::Command;
-use isoscope_core::screen::ScreenPoint;
+use isoscope_core::view::ScreenPoint;
 use std::io::Write;
 
 /// Write the drawing `commands` (DAC codes `0 ..= 2^bits - 1`) as an SVG

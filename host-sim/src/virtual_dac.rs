@@ -67,7 +67,7 @@ mod tests {
     use super::*;
     use isoscope_core::beam::{BeamConfig, Scheduler};
     use isoscope_core::command::Command;
-    use isoscope_core::screen::ScreenPoint;
+    use isoscope_core::view::ScreenPoint;
 
     #[test]
     fn records_a_scheduled_frame_with_its_clock() {

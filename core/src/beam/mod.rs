@@ -106,7 +106,7 @@
 //! use isoscope_core::beam::{BeamConfig, Park, Scheduler};
 //! use isoscope_core::command::Command;
 //! use isoscope_core::output::{Beam, Sample};
-//! use isoscope_core::screen::ScreenPoint;
+//! use isoscope_core::view::ScreenPoint;
 //!
 //! let cfg = BeamConfig {
 //!     bits: 4,
@@ -137,7 +137,7 @@
 use crate::command::Command;
 use crate::fastmath::{ceil, sqrt};
 use crate::output::{Beam, Sample, SampleSource};
-use crate::screen::ScreenPoint;
+use crate::view::ScreenPoint;
 
 /// The smallest accepted [`BeamConfig::lit_step`], in LSB per sample.
 ///

@@ -48,8 +48,7 @@ pub use stream::VolumeSpec;
 
 use crate::beam::{BeamConfig, BeamConfigError, FrameStats, Scheduler, frame_stats};
 use crate::command::{Command, Point3};
-use crate::screen::ScreenPoint;
-use crate::view::{Bounds, Projection, View, ViewError, ViewTransform};
+use crate::view::{Bounds, Projection, ScreenPoint, View, ViewError, ViewTransform};
 use crate::wire::{
     DeviceState, Levels, Message, NackCode, PROTOCOL_VERSION, ProtocolDecoder, SampleType, WireError, encode,
 };
