@@ -25,9 +25,10 @@
 //! - [`view`]: 3D view, projection and auto-fit to the DAC range
 //!   ([`view::ViewTransform`]), onto points in DAC units
 //!   ([`view::ScreenPoint`]).
-//! - [`beam`]: the beam scheduler (display list to DAC samples) and frame
-//!   statistics.
-//! - [`pace`]: slowing the sample clock to what the refill keeps up with.
+//! - [`beam`]: the beam scheduler (display list to DAC samples,
+//!   [`beam::Scheduler`]) and frame statistics ([`beam::FrameStats`]);
+//!   [`beam::pace`]: slowing the sample clock to what the refill keeps up
+//!   with.
 //! - [`output`]: the DAC samples and the [`output::Dac`] trait every DAC
 //!   implements:
 //!   - [`output::mock`]: a heap-free mock with ASCII art;
@@ -90,6 +91,5 @@ pub mod demo;
 pub mod engine;
 mod fastmath;
 pub mod output;
-pub mod pace;
 pub mod view;
 pub mod wire;

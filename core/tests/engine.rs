@@ -396,7 +396,7 @@ fn a_slowed_sample_clock_is_reported_in_the_refresh_rate() {
         })
     };
     assert_eq!(status(&mut e), Some(centi(1_000_000)));
-    // The board slowed its clock for this picture (crate::pace): the same
+    // The board slowed its clock for this picture (crate::beam::pace): the same
     // samples, played at half the rate.
     e.set_playback_rate(500_000);
     assert_eq!(status(&mut e), Some(centi(500_000)));

@@ -51,7 +51,7 @@
 //! the beam scheduler ([`Streaming::fill_from`]; a frame may end inside a
 //! half, and the next frame continues it). After each refill the DMA's
 //! position (NDTR) tells how much of the other half has played meanwhile;
-//! a [`isoscope_core::pace::Pacer`] turns that into TIM8's period (ARR,
+//! a [`isoscope_core::beam::pace::Pacer`] turns that into TIM8's period (ARR,
 //! preloaded): a picture whose refill takes more than 7/8 of a half slows
 //! the sample clock at once (down to [`MIN_SAMPLE_RATE_HZ`]), so the DMA
 //! never replays a stale half, and a lighter one brings it back to
@@ -527,7 +527,7 @@ mod dma {
     };
     use core::sync::atomic::{AtomicU8, AtomicU32, Ordering};
     use isoscope_core::output::{Beam, SampleSource, Samples};
-    use isoscope_core::pace::{self, PaceConfig, Pacer};
+    use isoscope_core::beam::pace::{self, PaceConfig, Pacer};
     use stm32f4xx_hal::interrupt;
 
     /// Halves the DMA has finished with (bit 0: first, bit 1: second), set

@@ -778,7 +778,7 @@ impl<'a> Engine<'a> {
 
     /// The board plays the samples at `hz` instead of
     /// [`EngineConfig::sample_rate_hz`]: it slowed its sample clock for a
-    /// picture its refill cannot keep up with ([`crate::pace`]). The
+    /// picture its refill cannot keep up with ([`crate::beam::pace`]). The
     /// refresh rate reported from now on (in `Status`) follows it; the
     /// samples, and beam times set in microseconds, do not change.
     pub fn set_playback_rate(&mut self, hz: u32) {

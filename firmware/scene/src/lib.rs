@@ -61,7 +61,7 @@ pub const QEMU_FRAMES: usize = 2;
 /// DAC samples per second (both channels and the blank pin).
 pub const SAMPLE_RATE_HZ: u32 = BOARD.sample_rate_hz;
 
-/// The slowest sample rate the board's pacer ([`isoscope_core::pace`])
+/// The slowest sample rate the board's pacer ([`isoscope_core::beam::pace`])
 /// may choose for a picture whose refill cannot keep up with
 /// [`SAMPLE_RATE_HZ`]: a half buffer then lasts 2 ms, more than the
 /// densest picture's refill takes.

@@ -24,7 +24,7 @@
 //!   cost wavers a little does not make the clock hunt.
 //!
 //! ```
-//! use isoscope_core::pace::{PaceConfig, Pacer};
+//! use isoscope_core::beam::pace::{PaceConfig, Pacer};
 //!
 //! // 512-sample halves; 168 ticks a sample (1 MS/s on a 168 MHz timer) at
 //! // best, 672 (250 kS/s) at worst.

@@ -1,0 +1,720 @@
+//! The beam scheduler itself: [`Scheduler`], commands in, samples out, as
+//! the [module docs](super) describe.
+
+use super::{BeamConfig, FrameStats};
+use crate::command::Command;
+use crate::fastmath::sqrt;
+use crate::output::{Beam, Sample, SampleSource};
+use crate::view::ScreenPoint;
+
+/// A cleaned command: finite, clamped, zero-length lines dropped.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+enum Step {
+    /// A polyline starts here (a `MoveTo`, or a `LineTo` with no open
+    /// polyline).
+    Start(Pos),
+    /// A line of non-zero length from the pen to here.
+    Line(Pos),
+    /// A dot.
+    Dot(Pos),
+}
+
+/// A position in DAC units, finite and in range.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+struct Pos {
+    x: f32,
+    y: f32,
+}
+
+impl Pos {
+    fn distance(self, o: Pos) -> f32 {
+        let (dx, dy) = (o.x - self.x, o.y - self.y);
+        sqrt(dx * dx + dy * dy)
+    }
+}
+
+/// Cleans the raw commands (see the module docs).
+#[derive(Debug, Clone)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+struct Clean<I> {
+    src: I,
+    /// Where the open polyline's pen is; `None` when no polyline is open.
+    pen: Option<Pos>,
+    max: f32,
+    skipped: u32,
+}
+
+impl<I: Iterator<Item = Command<ScreenPoint>>> Clean<I> {
+    /// The next cleaned command (consuming as much input as it takes).
+    fn next_step(&mut self) -> Option<Step> {
+        loop {
+            let command = self.src.next()?;
+            let p = *command.point();
+            if !(p.x.is_finite() && p.y.is_finite()) {
+                self.skipped = self.skipped.saturating_add(1);
+                self.pen = None;
+                continue;
+            }
+            // Not `f32::clamp`, which checks its bounds every call.
+            let fit = |v: f32| {
+                if v < 0.0 {
+                    0.0
+                } else if v > self.max {
+                    self.max
+                } else {
+                    v
+                }
+            };
+            let p = Pos { x: fit(p.x), y: fit(p.y) };
+            match command {
+                Command::MoveTo(_) => {
+                    self.pen = Some(p);
+                    return Some(Step::Start(p));
+                }
+                Command::LineTo(_) => match self.pen {
+                    None => {
+                        self.pen = Some(p);
+                        return Some(Step::Start(p));
+                    }
+                    Some(pen) if pen == p => continue,
+                    Some(_) => {
+                        self.pen = Some(p);
+                        return Some(Step::Line(p));
+                    }
+                },
+                Command::Point(_) => {
+                    self.pen = None;
+                    return Some(Step::Dot(p));
+                }
+            }
+        }
+    }
+}
+
+/// The expansion of one command into samples: blanked samples at the
+/// target, then lit steps from `from` to the target, then lit samples at
+/// the target.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+struct Plan {
+    to: Pos,
+    /// The lit steps' positions, in fixed point.
+    x: Dda,
+    y: Dda,
+    /// `to` rounded to DAC codes.
+    code: (u16, u16),
+    blank: u16,
+    step: u32,
+    steps: u32,
+    lit: u16,
+}
+
+/// Fractional bits of the fixed-point positions of lit steps: a code of up
+/// to 16 bits and 15 fractional bits fit an `i32` with room for rounding,
+/// and a whole move (at most `2^31 - 2^15`) does too.
+const FRAC: u32 = 15;
+
+/// One coordinate of a segment's lit steps, exactly: step `k` of `n` is at
+/// `from + floor(d * k / n)` in fixed point (`d = to - from`), kept as a
+/// quotient and a remainder so that a step is two additions and a compare,
+/// with no error that grows along the segment.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+struct Dda {
+    /// Position of the last step, fixed point, in `0 ..= max << FRAC`.
+    at: i32,
+    /// `d * k mod n` of the last step, in `0 .. n`.
+    err: i32,
+    /// `floor(d / n)`.
+    q: i32,
+    /// `d mod n` (Euclidean), in `0 .. n`.
+    r: i32,
+}
+
+impl Dda {
+    /// `v` (finite, in `0 ..= 65535`) in fixed point, rounded.
+    #[inline]
+    fn fixed(v: f32) -> i32 {
+        (v * (1u32 << FRAC) as f32 + 0.5) as i32
+    }
+
+    /// Steps from `at` to `to` (both [`Dda::fixed`]) in `n > 0` steps.
+    #[inline]
+    fn new(at: i32, to: i32, n: i32) -> Self {
+        let d = to - at;
+        Self { at, err: 0, q: d.div_euclid(n), r: d.rem_euclid(n) }
+    }
+
+    /// Advance one step (of `n`) and return the code there (rounded half
+    /// up; never beyond the segment's ends, so within the DAC range).
+    #[inline(always)]
+    fn step(&mut self, n: i32) -> u16 {
+        self.at += self.q;
+        self.err += self.r;
+        if self.err >= n {
+            self.err -= n;
+            self.at += 1;
+        }
+        ((self.at + (1 << (FRAC - 1))) >> FRAC) as u16
+    }
+}
+
+/// The beam scheduler: an iterator of DAC [`Sample`]s drawing a stream of
+/// commands. See the [module docs](super) for the exact semantics.
+///
+/// It holds one command of lookahead and a few counters, never allocates,
+/// and never panics; it ends (and stays ended) when the commands end and
+/// the beam is blanked.
+#[derive(Debug, Clone)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Scheduler<I> {
+    src: Clean<I>,
+    ahead: Option<Step>,
+    cfg: BeamConfig,
+    /// `cos(corner_angle_deg)`: a vertex is a corner when the cosine of its
+    /// turn is below this.
+    corner_cos: f32,
+    /// [`BeamConfig::segment_cap`].
+    cap: u32,
+    pos: Pos,
+    /// `pos` in the lit steps' fixed point ([`Dda::fixed`]), kept from the
+    /// command that went there rather than converted again.
+    fixed: (i32, i32),
+    lit: bool,
+    plan: Plan,
+    ended: bool,
+    stats: FrameStats,
+}
+
+impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
+    /// A scheduler drawing `commands` with `cfg` (sanitized, see
+    /// [`BeamConfig::sanitized`]), starting from the park position.
+    pub fn new<C>(commands: C, cfg: &BeamConfig) -> Self
+    where
+        C: IntoIterator<IntoIter = I, Item = Command<ScreenPoint>>,
+    {
+        let cfg = cfg.sanitized();
+        let park = cfg.park_sample();
+        Self::with_start(commands, &cfg, ScreenPoint::new(f32::from(park.x), f32::from(park.y)))
+    }
+
+    /// A scheduler whose beam starts (blanked and settled) at `start`
+    /// instead of the park position, e.g. where the previous frame ended
+    /// when [`Park::return_at_end`](super::Park::return_at_end) is off. A
+    /// `start` that is not finite means the park position; it is clamped
+    /// into range.
+    pub fn with_start<C>(commands: C, cfg: &BeamConfig, start: ScreenPoint) -> Self
+    where
+        C: IntoIterator<IntoIter = I, Item = Command<ScreenPoint>>,
+    {
+        let cfg = cfg.sanitized();
+        let max = f32::from(cfg.max_code());
+        let park = cfg.park_sample();
+        let start = if start.x.is_finite() && start.y.is_finite() {
+            Pos { x: start.x.clamp(0.0, max), y: start.y.clamp(0.0, max) }
+        } else {
+            Pos { x: f32::from(park.x), y: f32::from(park.y) }
+        };
+        let corner_cos = libm::cosf(cfg.corner_angle_deg * (core::f32::consts::PI / 180.0));
+        let mut src = Clean { src: commands.into_iter(), pen: None, max, skipped: 0 };
+        let ahead = src.next_step();
+        Self {
+            src,
+            ahead,
+            cap: cfg.segment_cap(),
+            cfg,
+            corner_cos,
+            pos: start,
+            fixed: (Dda::fixed(start.x), Dda::fixed(start.y)),
+            lit: false,
+            plan: Plan { to: start, ..Plan::default() },
+            ended: false,
+            stats: FrameStats::default(),
+        }
+    }
+
+    /// The statistics of the samples produced so far; once the iterator has
+    /// ended, those of the whole frame.
+    pub fn stats(&self) -> FrameStats {
+        FrameStats { skipped: self.src.skipped, ..self.stats }
+    }
+
+    /// The configuration in use (the sanitized one).
+    pub fn config(&self) -> &BeamConfig {
+        &self.cfg
+    }
+
+    /// Where the beam is headed, in DAC units: the target of the command
+    /// being drawn; once the iterator has ended, where the frame left the
+    /// beam (the park position with
+    /// [`Park::return_at_end`](super::Park::return_at_end)).
+    pub fn position(&self) -> ScreenPoint {
+        ScreenPoint::new(self.pos.x, self.pos.y)
+    }
+
+    #[inline]
+    fn code(&self, p: Pos) -> (u16, u16) {
+        // A `Pos` is finite and in `0 ..= max` (cleaned, or the park
+        // position). Round half away from zero, as `roundf`: `v + 0.5` is
+        // exact below 2^22 (codes are at most 65535), and `as` truncates
+        // (and saturates, should anything slip through). A few instructions
+        // instead of a call: this runs for every command.
+        let c = |v: f32| (v + 0.5) as u16;
+        (c(p.x), c(p.y))
+    }
+
+    /// Pop the lookahead and refill it.
+    fn take(&mut self) -> Option<Step> {
+        let step = self.ahead.take();
+        if step.is_some() {
+            self.ahead = self.src.next_step();
+        }
+        step
+    }
+
+    /// A plan that jumps (blanked) to `to`, then dwells `lit` samples there.
+    fn jump(&mut self, to: Pos, lit: u16) -> Plan {
+        self.fixed = (Dda::fixed(to.x), Dda::fixed(to.y));
+        let d = self.pos.distance(to);
+        self.stats.blank_length += d;
+        Plan {
+            to,
+            x: Dda::default(),
+            y: Dda::default(),
+            code: self.code(to),
+            blank: self.cfg.settle_samples(d),
+            step: 0,
+            steps: 0,
+            lit,
+        }
+    }
+
+    /// The plan of the next command, or `None` at the end of the frame.
+    fn next_plan(&mut self) -> Option<Plan> {
+        loop {
+            let plan = match self.take() {
+                Some(Step::Start(p)) => {
+                    if !matches!(self.ahead, Some(Step::Line(_))) {
+                        // Nothing to draw: the beam need not go there.
+                        continue;
+                    }
+                    self.stats.polylines = self.stats.polylines.saturating_add(1);
+                    self.jump(p, self.cfg.dwell_start)
+                }
+                Some(Step::Line(p)) => {
+                    let from = self.pos;
+                    let length = from.distance(p);
+                    self.stats.lit_length += length;
+                    let lit = match self.ahead {
+                        Some(Step::Line(q)) => {
+                            let (ax, ay) = (p.x - from.x, p.y - from.y);
+                            let (bx, by) = (q.x - p.x, q.y - p.y);
+                            // cos = dot / sqrt(norms) < corner_cos, without
+                            // the square root: compare squares, signs apart.
+                            let norms = (ax * ax + ay * ay) * (bx * bx + by * by);
+                            let dot = ax * bx + ay * by;
+                            let c = self.corner_cos;
+                            let bound = c * c * norms;
+                            // A zero or underflowed product is no corner.
+                            let corner = norms > 0.0
+                                && if c >= 0.0 {
+                                    dot < 0.0 || dot * dot < bound
+                                } else {
+                                    dot < 0.0 && dot * dot > bound
+                                };
+                            if corner { self.cfg.corner_dwell } else { 0 }
+                        }
+                        _ => self.cfg.dwell_end,
+                    };
+                    let steps = self.cfg.segment_samples_within(length, self.cap);
+                    // At most 2^17 / MIN_LIT_STEP + 1 (the cap): an i32.
+                    let n = i32::try_from(steps.max(1)).unwrap_or(i32::MAX);
+                    let (ax, ay) = self.fixed;
+                    let (tx, ty) = (Dda::fixed(p.x), Dda::fixed(p.y));
+                    self.fixed = (tx, ty);
+                    Plan {
+                        to: p,
+                        x: Dda::new(ax, tx, n),
+                        y: Dda::new(ay, ty, n),
+                        code: self.code(p),
+                        blank: 0,
+                        step: 0,
+                        steps,
+                        lit,
+                    }
+                }
+                Some(Step::Dot(p)) => {
+                    self.stats.points = self.stats.points.saturating_add(1);
+                    self.jump(p, self.cfg.point_dwell)
+                }
+                None => {
+                    if self.ended {
+                        return None;
+                    }
+                    self.ended = true;
+                    let to = if self.cfg.park.return_at_end {
+                        let park = self.cfg.park_sample();
+                        Pos { x: f32::from(park.x), y: f32::from(park.y) }
+                    } else {
+                        self.pos
+                    };
+                    let mut plan = self.jump(to, 0);
+                    if plan.blank == 0 && self.lit {
+                        plan.blank = 1;
+                    }
+                    plan
+                }
+            };
+            self.pos = plan.to;
+            return Some(plan);
+        }
+    }
+}
+
+impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
+    /// The next samples of the frame, handed to `put` one by one, at most
+    /// `max` of them; returns how many. Fewer than `max` only when the frame
+    /// has ended. The same samples, statistics and state as taking them
+    /// from the iterator one [`next`](Iterator::next) at a time (which is
+    /// this for one), which one
+    /// may mix with this; but a run of repeated samples (a jump's settle, a
+    /// dwell) or a segment's steps costs one loop here, not a state machine
+    /// round per sample. The firmware refills its DMA halves this way.
+    pub fn fill_with<F: FnMut(Sample)>(&mut self, max: usize, mut put: F) -> usize {
+        let mut done = 0usize;
+        while done < max {
+            let room = max - done;
+            let plan = &mut self.plan;
+            if plan.blank > 0 {
+                let n = usize::from(plan.blank).min(room);
+                plan.blank -= n as u16; // n <= blank
+                let (x, y) = plan.code;
+                let s = Sample::new(x, y, Beam::Off);
+                for _ in 0..n {
+                    put(s);
+                }
+                self.ran(n, Beam::Off);
+                done += n;
+                continue;
+            }
+            if plan.step < plan.steps {
+                let left = plan.steps - plan.step;
+                let n = if (left as usize) < room { left } else { room as u32 };
+                // The steps before the last in registers (the DDA's state is
+                // written back once), then the last, exactly at the target.
+                let last = n == left;
+                let steps = plan.steps as i32; // at most the cap, an i32
+                let (mut x, mut y) = (plan.x, plan.y);
+                for _ in 0..n - u32::from(last) {
+                    put(Sample::new(x.step(steps), y.step(steps), Beam::On));
+                }
+                if last {
+                    put(Sample::new(plan.code.0, plan.code.1, Beam::On));
+                }
+                (plan.x, plan.y) = (x, y);
+                plan.step += n;
+                self.ran(n as usize, Beam::On);
+                done += n as usize;
+                continue;
+            }
+            if plan.lit > 0 {
+                let n = usize::from(plan.lit).min(room);
+                plan.lit -= n as u16; // n <= lit
+                let (x, y) = plan.code;
+                let s = Sample::new(x, y, Beam::On);
+                for _ in 0..n {
+                    put(s);
+                }
+                self.ran(n, Beam::On);
+                done += n;
+                continue;
+            }
+            match self.next_plan() {
+                Some(plan) => self.plan = plan,
+                None => break,
+            }
+        }
+        done
+    }
+
+    /// [`Self::fill_with`] into a slice: fills `out` from the start and
+    /// returns how many samples it wrote, fewer than `out.len()` only at the
+    /// end of the frame.
+    pub fn fill(&mut self, out: &mut [Sample]) -> usize {
+        let mut slots = out.iter_mut();
+        self.fill_with(slots.len(), |s| {
+            if let Some(slot) = slots.next() {
+                *slot = s;
+            }
+        })
+    }
+
+    /// Run to the end of the frame without making the samples, only
+    /// counting them: [`Scheduler::stats`] is then the frame's, as if every
+    /// sample had been taken (a few operations a command, not a few a
+    /// sample).
+    pub fn skip_to_end(&mut self) {
+        loop {
+            let plan = &mut self.plan;
+            let (blank, steps, lit) = (plan.blank, plan.steps - plan.step.min(plan.steps), plan.lit);
+            (plan.blank, plan.step, plan.lit) = (0, plan.steps, 0);
+            self.ran(usize::from(blank), Beam::Off);
+            self.ran(steps as usize, Beam::On);
+            self.ran(usize::from(lit), Beam::On);
+            match self.next_plan() {
+                Some(plan) => self.plan = plan,
+                None => break,
+            }
+        }
+    }
+
+    /// Account for `n` samples just emitted with `beam`.
+    #[inline(always)]
+    fn ran(&mut self, n: usize, beam: Beam) {
+        if n > 0 {
+            self.lit = beam == Beam::On;
+            self.stats.samples += n as u64;
+            if self.lit {
+                self.stats.lit_samples += n as u64;
+            }
+        }
+    }
+}
+
+impl<I: Iterator<Item = Command<ScreenPoint>>> Iterator for Scheduler<I> {
+    type Item = Sample;
+
+    /// One sample: [`Scheduler::fill_with`] for one.
+    fn next(&mut self) -> Option<Sample> {
+        let mut out = None;
+        self.fill_with(1, |s| out = Some(s));
+        out
+    }
+
+    fn size_hint(&self) -> (usize, Option<usize>) {
+        let p = &self.plan;
+        let left = u64::from(p.blank) + u64::from(p.steps - p.step.min(p.steps)) + u64::from(p.lit);
+        (usize::try_from(left).unwrap_or(usize::MAX), None)
+    }
+}
+
+impl<I: Iterator<Item = Command<ScreenPoint>>> core::iter::FusedIterator for Scheduler<I> {}
+
+impl<I: Iterator<Item = Command<ScreenPoint>>> SampleSource for Scheduler<I> {
+    #[inline]
+    fn fill_with<F: FnMut(Sample)>(&mut self, max: usize, put: F) -> usize {
+        Scheduler::fill_with(self, max, put)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::beam::{Park, frame_stats};
+    use std::vec::Vec;
+
+    fn m(x: f32, y: f32) -> Command<ScreenPoint> {
+        Command::MoveTo(ScreenPoint::new(x, y))
+    }
+    fn l(x: f32, y: f32) -> Command<ScreenPoint> {
+        Command::LineTo(ScreenPoint::new(x, y))
+    }
+    fn p(x: f32, y: f32) -> Command<ScreenPoint> {
+        Command::Point(ScreenPoint::new(x, y))
+    }
+    fn run(cmds: &[Command<ScreenPoint>], cfg: &BeamConfig) -> Vec<Sample> {
+        Scheduler::new(cmds.iter().copied(), cfg).collect()
+    }
+    fn on(x: u16, y: u16) -> Sample {
+        Sample::new(x, y, Beam::On)
+    }
+    fn off(x: u16, y: u16) -> Sample {
+        Sample::new(x, y, Beam::Off)
+    }
+    /// Runs of equal samples: (sample, count).
+    fn runs(samples: &[Sample]) -> Vec<(Sample, usize)> {
+        let mut out: Vec<(Sample, usize)> = Vec::new();
+        for &s in samples {
+            match out.last_mut() {
+                Some((last, n)) if *last == s => *n += 1,
+                _ => out.push((s, 1)),
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn exact_samples_of_a_polyline_with_a_corner() {
+        let cfg = BeamConfig {
+            bits: 6,
+            lit_step: 4.0,
+            settle_base: 1.0,
+            settle_per_lsb: 0.25,
+            settle_max: 10,
+            dwell_start: 2,
+            dwell_end: 3,
+            corner_dwell: 1,
+            corner_angle_deg: 45.0,
+            point_dwell: 2,
+            park: Park { x: 0, y: 0, return_at_end: true },
+        };
+        let s = run(&[m(8.0, 0.0), l(16.0, 0.0), l(16.0, 4.0), p(20.0, 4.0)], &cfg);
+        let want = [
+            off(8, 0),
+            off(8, 0),
+            off(8, 0), // |(8,0)| = 8: ceil(1 + 2) = 3
+            on(8, 0),
+            on(8, 0), // dwell_start
+            on(12, 0),
+            on(16, 0), // 8 LSB in 2 steps
+            on(16, 0), // a 90 degree corner
+            on(16, 4), // 4 LSB in 1 step
+            on(16, 4),
+            on(16, 4),
+            on(16, 4), // dwell_end
+            off(20, 4),
+            off(20, 4), // jump of 4: ceil(1 + 1) = 2
+            on(20, 4),
+            on(20, 4), // point_dwell
+            off(0, 0),
+            off(0, 0),
+            off(0, 0),
+            off(0, 0),
+            off(0, 0),
+            off(0, 0), // back to park: |(20,4)| = 20.4: ceil(1 + 5.1) = 7
+            off(0, 0),
+        ];
+        assert_eq!(s, want);
+        let st = frame_stats([m(8.0, 0.0), l(16.0, 0.0), l(16.0, 4.0), p(20.0, 4.0)], &cfg);
+        assert_eq!((st.polylines, st.points, st.skipped), (1, 1, 0));
+        assert_eq!(st.lit_length, 12.0);
+        assert!((st.blank_length - (8.0 + 4.0 + 416f32.sqrt())).abs() < 1e-4);
+        assert_eq!((st.samples, st.lit_samples, st.blank_samples()), (23, 11, 12));
+        assert_eq!(st.fps(23_000.0), 1000.0);
+    }
+
+    #[test]
+    fn empty_frames() {
+        let d = BeamConfig::default();
+        assert!(run(&[], &d).is_empty());
+        // Bare moves, NaN and zero-length lines draw nothing at all.
+        let nothing = [m(100.0, 100.0), m(5.0, 5.0), l(5.0, 5.0), l(f32::NAN, 1.0), m(9.0, f32::INFINITY)];
+        assert!(run(&nothing, &d).is_empty());
+        let st = frame_stats(nothing, &d);
+        assert_eq!(st, FrameStats { skipped: 2, ..FrameStats::default() });
+        assert_eq!(st.fps(1e6), 0.0);
+        // Starting elsewhere, the empty frame still returns to park.
+        let s: Vec<Sample> =
+            Scheduler::with_start(core::iter::empty(), &d, ScreenPoint::new(4095.0, 0.0)).collect();
+        assert_eq!(s, std::vec![off(0, 0); 18]);
+    }
+
+    #[test]
+    fn frame_ends_blanked_in_place_without_return() {
+        let cfg = BeamConfig { park: Park { x: 0, y: 0, return_at_end: false }, ..BeamConfig::default() };
+        let mut sch = Scheduler::new([p(100.0, 200.0)], &cfg);
+        let s: Vec<Sample> = sch.by_ref().collect();
+        assert_eq!(s.last(), Some(&off(100, 200)));
+        assert_eq!(s.iter().filter(|s| s.beam == Beam::On).count(), 4);
+        assert_eq!(sch.position(), ScreenPoint::new(100.0, 200.0));
+        assert_eq!(sch.next(), None);
+        // Chaining: the next frame starts from there; a dot at the same
+        // place needs no jump.
+        let s: Vec<Sample> = Scheduler::with_start([p(100.0, 200.0)], &cfg, sch.position()).collect();
+        assert_eq!(s, [on(100, 200), on(100, 200), on(100, 200), on(100, 200), off(100, 200)]);
+    }
+
+    #[test]
+    fn settle_grows_with_jump_length() {
+        let d = BeamConfig::default();
+        let mut last = 0;
+        let stay = BeamConfig { park: Park { return_at_end: false, ..d.park }, ..d };
+        for len in [0.5f32, 1.0, 100.0, 256.0, 1000.0, 2048.0, 3000.0, 4095.0] {
+            let s = run(&[p(len, 0.0)], &stay);
+            let blank_before = s.iter().take_while(|s| s.beam == Beam::Off).count();
+            assert_eq!(blank_before, usize::from(d.settle_samples(len)), "jump of {len}");
+            assert!(blank_before >= last, "settle shrank at {len}");
+            last = blank_before;
+        }
+        // The diagonal, the longest jump: 2 + 22.6 -> 25.
+        let s = run(&[p(4095.0, 4095.0)], &stay);
+        assert_eq!(s.iter().take_while(|s| s.beam == Beam::Off).count(), 25);
+        assert_eq!(d.settle_samples(0.0), 0);
+        assert_eq!(d.settle_samples(0.5), 3);
+        assert_eq!(d.settle_samples(1000.0), 6);
+        assert_eq!(d.settle_samples(4096.0), 18);
+        // The cap.
+        let steep = BeamConfig { settle_per_lsb: 1.0, ..d };
+        assert_eq!(steep.settle_samples(4096.0), 32);
+        assert_eq!(BeamConfig { settle_max: 0, ..steep }.settle_samples(4096.0), 1);
+        assert_eq!(d.settle_samples(f32::INFINITY), 32);
+        assert_eq!(d.settle_samples(f32::NAN), 0);
+    }
+
+    #[test]
+    fn corner_dwell_only_at_sharp_corners() {
+        // lit_step 10.5 and 10-LSB segments: one sample per segment, so a
+        // run of two equal lit samples in the middle is a corner dwell.
+        let cfg = BeamConfig { lit_step: 10.5, ..BeamConfig::default() };
+        let dwell_at = |cmds: &[Command<ScreenPoint>]| -> Vec<usize> {
+            runs(&run(cmds, &cfg)).iter().filter(|(s, _)| s.beam == Beam::On).map(|&(_, n)| n).collect()
+        };
+        // Straight on: dwell_start (2) at the start, 1 + dwell_end (1) at the end.
+        let straight = [m(100.0, 100.0), l(110.0, 100.0), l(120.0, 100.0), l(130.0, 100.0)];
+        assert_eq!(dwell_at(&straight), [2, 1, 1, 2]);
+        // A 30 degree bend: not a corner.
+        let c30 = libm::cosf(30f32.to_radians()) * 10.0;
+        let s30 = libm::sinf(30f32.to_radians()) * 10.0;
+        let bend = [m(100.0, 100.0), l(110.0, 100.0), l(110.0 + c30, 100.0 + s30)];
+        assert_eq!(dwell_at(&bend), [2, 1, 2]);
+        // Turns of 90 and 135 degrees: corners (1 + corner_dwell samples).
+        let square = [m(100.0, 100.0), l(110.0, 100.0), l(110.0, 110.0), l(100.0, 110.0)];
+        assert_eq!(dwell_at(&square), [2, 2, 2, 2]);
+        let sharp = [m(100.0, 100.0), l(110.0, 100.0), l(100.0, 100.0 + 1e-3)];
+        assert_eq!(dwell_at(&sharp), [2, 2, 2]);
+        // A U-turn.
+        let back = [m(100.0, 100.0), l(110.0, 100.0), l(100.0, 100.0)];
+        assert_eq!(dwell_at(&back), [2, 2, 2]);
+        // Threshold 180: never a corner; 0: every bend.
+        let never = BeamConfig { corner_angle_deg: 180.0, ..cfg };
+        assert_eq!(run(&back, &never).iter().filter(|s| s.beam == Beam::On).count(), 5);
+        let always = BeamConfig { corner_angle_deg: 0.0, ..cfg };
+        assert_eq!(run(&bend, &always).iter().filter(|s| s.beam == Beam::On).count(), 6);
+    }
+
+    #[test]
+    fn constant_speed_and_exact_end_points() {
+        let cfg = BeamConfig { lit_step: 16.0, ..BeamConfig::default() };
+        // 100 LSB: ceil(100 / 16) = 7 steps of 14.29.
+        let s = run(&[m(1000.0, 1000.0), l(1100.0, 1000.0)], &cfg);
+        let lit: Vec<u16> = s.iter().filter(|s| s.beam == Beam::On).map(|s| s.x).collect();
+        assert_eq!(lit, [1000, 1000, 1014, 1029, 1043, 1057, 1071, 1086, 1100, 1100]);
+        // Sub-LSB end points are rounded to the nearest code, half away.
+        let s = run(&[m(10.4, 10.5), l(30.6, 10.5)], &cfg);
+        let lit: Vec<Sample> = s.into_iter().filter(|s| s.beam == Beam::On).collect();
+        assert_eq!(lit.first(), Some(&on(10, 11)));
+        assert_eq!(lit.last(), Some(&on(31, 11)));
+        assert_eq!(lit.len(), 2 + 2 + 1);
+    }
+
+    #[test]
+    fn out_of_range_and_non_finite_points() {
+        let cfg =
+            BeamConfig { bits: 8, lit_step: 1000.0, dwell_start: 1, dwell_end: 0, ..BeamConfig::default() };
+        // Clamped: a line from far left to far right along y = 300 (> 255).
+        let s = run(&[m(-1e30, 300.0), l(f32::MAX, 300.0)], &cfg);
+        let lit: Vec<Sample> = s.into_iter().filter(|s| s.beam == Beam::On).collect();
+        assert_eq!(lit, [on(0, 255), on(255, 255)]);
+        // A NaN in the middle of a polyline breaks it: no line to or from it.
+        let s = run(&[m(0.0, 0.0), l(10.0, 0.0), l(f32::NAN, 5.0), l(20.0, 0.0), l(30.0, 0.0)], &cfg);
+        let st = frame_stats([m(0.0, 0.0), l(10.0, 0.0), l(f32::NAN, 5.0), l(20.0, 0.0), l(30.0, 0.0)], &cfg);
+        let lit: Vec<Sample> = s.into_iter().filter(|s| s.beam == Beam::On).collect();
+        assert_eq!(lit, [on(0, 0), on(10, 0), on(20, 0), on(30, 0)]);
+        assert_eq!((st.polylines, st.skipped, st.lit_length), (2, 1, 20.0));
+        // A LineTo after a Point starts a new polyline at its own point.
+        let st = frame_stats([p(5.0, 5.0), l(15.0, 5.0), l(25.0, 5.0)], &cfg);
+        assert_eq!((st.points, st.polylines, st.lit_length), (1, 1, 10.0));
+    }
+}
