@@ -5,6 +5,10 @@
 //! 2x2 subgrids, zero-copy grid and volume views, and the chicken-wire
 //! contour surface of a volume.
 //!
+//! The modules follow the pipeline, volume to DAC: each folder of `src/`
+//! is one stage ([`contour`], [`engine`], [`view`], [`beam`], [`output`])
+//! or the UART protocol ([`wire`]); [`command`] and [`demo`] stand alone.
+//!
 //! - [`contour`]: the contouring, bottom up:
 //!   - [`contour::subgrid`]: the five nodes and eight downhill edges of a
 //!     2x2 subgrid.
