@@ -6,7 +6,7 @@
 //! contour surface of a volume.
 //!
 //! The modules follow the pipeline, volume to DAC: each folder of `src/`
-//! is one stage ([`contour`], [`engine`], [`view`], [`beam`], [`output`])
+//! is one stage ([`contour`], [`path`], [`engine`], [`view`], [`beam`], [`output`])
 //! or the UART protocol ([`wire`]); [`command`] and [`demo`] stand alone.
 //!
 //! - [`contour`]: the contouring, bottom up:
@@ -37,11 +37,14 @@
 //!   implements:
 //!   - [`output::mock`]: a heap-free mock with ASCII art;
 //!   - `output::mcp4922` (feature `embedded-hal`): the MCP4922 SPI DAC.
-//! - [`engine`]: the device engine behind the UART, and the one picture
-//!   pipeline of every board and host command: streaming volumes slice by
-//!   slice, cull, stitch, merge and order in 3D in bounded memory, a
-//!   double-buffered picture, view changes without the volume; [`engine::Board`]
-//!   names a board's capacities.
+//! - [`path`]: the one path pipeline: surfaces stored compactly
+//!   ([`path::Geometry`]), culled, stitched, merged, spliced and ordered in
+//!   bounded memory.
+//! - [`engine`]: the device engine behind the UART, which every board and
+//!   every host command that draws a picture runs: streaming volumes slice
+//!   by slice, the path pipeline once a volume is complete, a
+//!   double-buffered picture, view changes without the volume;
+//!   [`engine::Board`] names a board's capacities.
 //! - [`wire`]: the UART frame protocol shared by host and device (postcard,
 //!   CRC-32, COBS; see `docs/wire-format.md`).
 //!
@@ -95,5 +98,6 @@ pub mod demo;
 pub mod engine;
 mod fastmath;
 pub mod output;
+pub mod path;
 pub mod view;
 pub mod wire;

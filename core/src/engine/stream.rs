@@ -14,11 +14,10 @@
 //! refreshed in between; the next slice's data then waits for the job
 //! (the caller stops feeding), or finishes it first if it comes anyway.
 
-use super::chain;
-use super::geometry::{Geometry, Held};
 use crate::command::{Command, CommandSink, Point3};
 use crate::contour::trace::Traversal;
 use crate::contour::{ContourStats, RowContourer};
+use crate::path::{self, Geometry, Held};
 use crate::wire::{AXIS_X, AXIS_Y, AXIS_Z, Levels, NackCode, SampleType};
 use core::convert::Infallible;
 
@@ -132,7 +131,7 @@ pub(crate) struct Stream<'a> {
 /// Keeps every command: in the back while it has room, then in the spill;
 /// the store that refuses one counts it. The spill stops short of its room
 /// by the scratch the stitch pass will want for all the pieces kept
-/// ([`chain::stitch_reserve`]), in the slice memory, which the spill then
+/// ([`path::stitch_reserve`]), in the slice memory, which the spill then
 /// shares with it: a surface larger than the board holds is cut, but what
 /// is kept is stitched and ordered.
 struct Keep<'g, 'a, 's> {
@@ -162,7 +161,7 @@ impl CommandSink<Point3> for Keep<'_, '_, '_> {
             let frags = *self.frags as usize + usize::from(starts);
             let points = self.back.len() + self.spill.len() + 1;
             // Room for one more spilled point beside the stitch's scratch.
-            let need = Geometry::bytes_for(self.spill.len() + 1) + chain::stitch_reserve(frags, points);
+            let need = Geometry::bytes_for(self.spill.len() + 1) + path::stitch_reserve(frags, points);
             let cap = if need <= self.memory { usize::MAX } else { 0 };
             self.spill.push_within(c, cap).is_ok()
         };
@@ -487,7 +486,7 @@ impl<'a> Stream<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::engine::geometry::{Kind, Source};
+    use crate::path::{Kind, Source};
 
     /// `cmds` kept in a back of `back` points and a spill of `spill`: how
     /// many points each holds, and all of them in order (x, kind).
