@@ -195,10 +195,22 @@ impl Tour {
     /// at its best vertex.
     pub(super) fn improve(&self, x: &mut Index<'_, '_>, start: Packed) {
         if let Some(mut near) = Near::build(x, self) {
-            // Moves among screen neighbours: every step's, however long the
-            // tour, until a pass finds none; the loops' entries chosen
-            // again after each pass (and the neighbours found again).
+            // The tour made again by nearest neighbour on the screen (the
+            // one in space leaves ends far apart on the screen that are near
+            // in depth), then moves among screen neighbours: every step's,
+            // however long the tour, until a pass finds none; the loops'
+            // entries chosen again after each pass (and the neighbours found
+            // again).
             let mut budget = SEARCH_BUDGET;
+            if self.nearest_on_screen(x, &near, &mut budget) {
+                for k in 0..self.len - 1 {
+                    self.measure(x, k);
+                }
+                match Near::build(x, self) {
+                    Some(n) => near = n,
+                    None => return self.best_entries(x, start),
+                }
+            }
             for _ in 0..16 {
                 let a = self.two_opt_near(x, &near, &mut budget);
                 let b = self.or_opt_near(x, &near, &mut budget);
@@ -359,6 +371,79 @@ impl Tour {
             }
         }
         moved
+    }
+
+    /// The tour made again on the screen: from the start, the step with the
+    /// end nearest the last exit next, entered there; the nearest found in
+    /// rings of cells around it, the steps already placed taken out of the
+    /// lists as they are passed. Returns false (the tour as it was) when the
+    /// budget runs out first.
+    fn nearest_on_screen(&self, x: &mut Index<'_, '_>, near: &Near, budget: &mut u64) -> bool {
+        let Metric::Screen { view, shift, park } = self.metric else { return false };
+        let n = self.len;
+        let [gx, gy] = near.cells;
+        let mut here = park;
+        for k in 0..n {
+            let [cx, cy] = near.coords(here);
+            let mut best: Option<(f32, usize)> = None;
+            let side = 1.0 / near.scale;
+            for r in 0..gx.max(gy) {
+                // Anything in ring r is at least (r - 1) cells away.
+                if best.is_some_and(|(d, _)| d <= (r as f32 - 1.0).max(0.0) * side) {
+                    break;
+                }
+                let (x0, x1) = (cx.saturating_sub(r), (cx + r).min(gx - 1));
+                let (y0, y1) = (cy.saturating_sub(r), (cy + r).min(gy - 1));
+                for yy in y0..=y1 {
+                    let edge = yy + r == cy || yy == cy + r;
+                    let mut xx = x0;
+                    while xx <= x1 {
+                        let c = near.heads + xx + gx * yy;
+                        // Walk the cell's list, unlinking the placed ends.
+                        let (mut prev, mut at) = (NONE, x.w.get(c));
+                        while at != NONE {
+                            *budget = budget.saturating_sub(1);
+                            let p = at as usize;
+                            let next = x.w.get(x.links + p);
+                            if near.pos(x, p) < k {
+                                if prev == NONE {
+                                    x.w.set(c, next);
+                                } else {
+                                    x.w.set(x.links + prev as usize, next);
+                                }
+                            } else {
+                                let s = Metric::at(&view, shift, x.point(p));
+                                let d = sqrt(
+                                    (s[0] - here[0]) * (s[0] - here[0]) + (s[1] - here[1]) * (s[1] - here[1]),
+                                );
+                                if best.is_none_or(|(b, _)| d < b) {
+                                    best = Some((d, p));
+                                }
+                                prev = at;
+                            }
+                            at = next;
+                        }
+                        // Inside the ring's square only its two side cells.
+                        xx = if edge || r == 0 || xx != x0 { xx + 1 } else { x1.max(xx + 1) };
+                    }
+                }
+            }
+            if *budget == 0 {
+                return false;
+            }
+            let Some((_, p)) = best else { return false };
+            let j = near.pos(x, p);
+            let (ek, ok) = self.get(&x.w, k);
+            let (ej, oj) = self.get(&x.w, j);
+            // Step j comes to k, entered at p; step k goes where j was.
+            let (e, o) = if p == ej { (ej, oj) } else { (oj, ej) };
+            self.set(&mut x.w, k, e, o);
+            self.set(&mut x.w, j, ek, ok);
+            near.place(x, self, k, k);
+            near.place(x, self, j, j);
+            here = Metric::at(&view, shift, x.point(o));
+        }
+        true
     }
 
     /// 2-opt among screen neighbours: a run reversed where a step's exit
