@@ -213,7 +213,7 @@ impl Tour {
             }
             for _ in 0..16 {
                 let a = self.two_opt_near(x, &near, &mut budget);
-                let b = self.or_opt_near(x, &near, &mut budget);
+                let b = self.or_opt(x, Some(&near), 0, &mut budget);
                 self.best_entries(x, start);
                 if !(a || b) || budget == 0 {
                     break;
@@ -233,7 +233,7 @@ impl Tour {
         let mut budget = SEARCH_BUDGET;
         for _ in 0..8 {
             let a = self.two_opt(x, window, &mut budget);
-            let b = self.or_opt(x, window, &mut budget);
+            let b = self.or_opt(x, None, window, &mut budget);
             if !(a || b) || budget == 0 {
                 break;
             }
@@ -241,35 +241,50 @@ impl Tour {
         self.best_entries(x, start);
     }
 
-    /// Or-opt: take one step out and put it back, either way round, where
-    /// that shortens the tour most, among the `window` positions on either
-    /// side; a pass over every step. Returns whether it moved one.
-    pub(super) fn or_opt(&self, x: &mut Index<'_, '_>, window: usize, budget: &mut u64) -> bool {
+    /// Or-opt: a run of up to [`OR_CHAIN`] steps taken out and put back,
+    /// either way round, where that shortens the tour most; a pass over
+    /// every run. The places tried: with `near`, just after a step that
+    /// leaves, or just before one that enters, near the run's ends on the
+    /// screen (within the gain of taking it out); without, the `window`
+    /// places on either side in the tour (runs of one step). Returns
+    /// whether it moved one.
+    pub(super) fn or_opt(
+        &self,
+        x: &mut Index<'_, '_>,
+        near: Option<&Near>,
+        window: usize,
+        budget: &mut u64,
+    ) -> bool {
         let n = self.len;
         if n < 4 {
             return false;
         }
         let m = self.metric;
+        let chain = if near.is_some() { OR_CHAIN } else { 1 };
         let mut moved = false;
-        for i in 1..n {
+        for (len, i) in (1..=chain).flat_map(|len| (1..n.saturating_sub(len - 1)).map(move |i| (len, i))) {
             if *budget == 0 {
                 break;
             }
-            let (e, o) = self.ends(x, i);
+            if i + len > n {
+                continue;
+            }
+            // The run i .. i + len, entered at e and left at o.
+            let last = i + len - 1;
+            let (e, o) = (self.ends(x, i).0, self.ends(x, last).1);
+            let (ei, oi) = (self.get(&x.w, i).0, self.get(&x.w, last).1);
             let prev = self.ends(x, i - 1).1;
-            let next = (i + 1 < n).then(|| self.ends(x, i + 1).0);
-            let gain = self.jump(&x.w, i - 1) + if i + 1 < n { self.jump(&x.w, i) } else { 0.0 }
+            let next = (last + 1 < n).then(|| self.ends(x, last + 1).0);
+            let gain = self.jump(&x.w, i - 1) + if last + 1 < n { self.jump(&x.w, last) } else { 0.0 }
                 - next.map_or(0.0, |nx| m.d(prev, nx));
             if gain <= 1e-3 {
                 continue;
             }
             // Between steps k and k + 1 (k + 1 == n: after the last).
             let mut best: Option<(f32, usize, bool)> = None;
-            let lo = i.saturating_sub(window).max(1) - 1;
-            let hi = (i + window).min(n - 1);
-            for k in lo..=hi {
-                if k == i || k + 1 == i {
-                    continue;
+            let mut consider = |x: &Index<'_, '_>, k: usize, budget: &mut u64| {
+                if (i - 1..=last).contains(&k) || k >= n {
+                    return;
                 }
                 *budget = budget.saturating_sub(1);
                 let a = self.ends(x, k).1;
@@ -288,85 +303,44 @@ impl Tour {
                         best = Some((add, k, flip));
                     }
                 }
-            }
-            if let Some((_, k, flip)) = best {
-                self.relocate(x, i, 1, k, flip);
-                moved = true;
-            }
-        }
-        moved
-    }
-
-    /// Or-opt among screen neighbours: each step tried just after a step
-    /// that leaves it, or just before one that enters it, within the gain
-    /// of taking it out of the tour. Returns whether it moved one.
-    pub(super) fn or_opt_near(&self, x: &mut Index<'_, '_>, near: &Near, budget: &mut u64) -> bool {
-        let n = self.len;
-        if n < 4 {
-            return false;
-        }
-        let m = self.metric;
-        let mut moved = false;
-        for (len, i) in (1..=OR_CHAIN).flat_map(|len| (1..n.saturating_sub(len - 1)).map(move |i| (len, i))) {
-            if *budget == 0 {
-                break;
-            }
-            if i + len > n {
-                continue;
-            }
-            // The run i .. i + len, entered at e and left at o.
-            let last = i + len - 1;
-            let (e, o) = (self.ends(x, i).0, self.ends(x, last).1);
-            let (ei, oi) = (self.get(&x.w, i).0, self.get(&x.w, last).1);
-            let prev = self.ends(x, i - 1).1;
-            let next = (last + 1 < n).then(|| self.ends(x, last + 1).0);
-            let gain = self.jump(&x.w, i - 1) + if last + 1 < n { self.jump(&x.w, last) } else { 0.0 }
-                - next.map_or(0.0, |nx| m.d(prev, nx));
-            if gain <= 1e-3 {
-                continue;
-            }
-            let mut best: Option<(f32, usize, bool)> = None;
-            let mut consider = |x: &Index<'_, '_>, k: usize, budget: &mut u64| {
-                if (i - 1..=last).contains(&k) || k >= n {
-                    return;
-                }
-                *budget = budget.saturating_sub(1);
-                let a = self.ends(x, k).1;
-                let b = (k + 1 < n).then(|| self.ends(x, k + 1).0);
-                let old = if k + 1 < n { self.jump(&x.w, k) } else { 0.0 };
-                for flip in [false, true] {
-                    let (ie, io) = if flip { (o, e) } else { (e, o) };
-                    let add = m.d(a, ie) + b.map_or(0.0, |b| m.d(io, b)) - old;
-                    if add + 1e-3 < gain && best.is_none_or(|(c, ..)| add < c) {
-                        best = Some((add, k, flip));
+            };
+            match near {
+                Some(near) => {
+                    for end in [ei, oi] {
+                        near.each_near(
+                            x,
+                            m,
+                            x.point(end),
+                            gain,
+                            |x, c, budget| {
+                                let j = near.pos(x, c);
+                                let (ej, oj) = self.get(&x.w, j);
+                                if oj == c {
+                                    consider(x, j, budget);
+                                }
+                                if ej == c && j > 0 {
+                                    consider(x, j - 1, budget);
+                                }
+                            },
+                            budget,
+                        );
+                        if ei == oi {
+                            break;
+                        }
                     }
                 }
-            };
-            for end in [ei, oi] {
-                near.each_near(
-                    x,
-                    m,
-                    x.point(end),
-                    gain,
-                    |x, c, budget| {
-                        let j = near.pos(x, c);
-                        let (ej, oj) = self.get(&x.w, j);
-                        if oj == c {
-                            consider(x, j, budget);
-                        }
-                        if ej == c && j > 0 {
-                            consider(x, j - 1, budget);
-                        }
-                    },
-                    budget,
-                );
-                if ei == oi {
-                    break;
+                None => {
+                    let lo = i.saturating_sub(window).max(1) - 1;
+                    for k in lo..=(i + window).min(n - 1) {
+                        consider(x, k, budget);
+                    }
                 }
             }
             if let Some((_, k, flip)) = best {
                 let dest = self.relocate(x, i, len, k, flip);
-                near.place(x, self, i.min(dest), last.max(dest + len - 1));
+                if let Some(near) = near {
+                    near.place(x, self, i.min(dest), last.max(dest + len - 1));
+                }
                 moved = true;
             }
         }

@@ -464,7 +464,7 @@ proptest::proptest! {
                 if let Some(near) = Near::build(&mut x, &tour) {
                     let mut budget = SEARCH_BUDGET;
                     let l0 = tour_length(&tour, &x, start);
-                    tour.or_opt_near(&mut x, &near, &mut budget);
+                    tour.or_opt(&mut x, Some(&near), 0, &mut budget);
                     let l1 = tour_length(&tour, &x, start);
                     proptest::prop_assert!(l1 <= l0 * 1.000_01 + 1e-3, "or-opt: {l1} > {l0}");
                     tour.two_opt_near(&mut x, &near, &mut budget);
