@@ -10,7 +10,11 @@ use anyhow::{Context, Result};
 use isoscope_core::engine::{Engine, EngineConfig, Event};
 use isoscope_core::output::Dac;
 use std::io::{ErrorKind, Read, Write};
+use std::net::{SocketAddr, TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 /// Line time the paced port may deliver at once after a pause (a DMA ring
@@ -40,7 +44,15 @@ pub struct DeviceOptions {
     pub extent: usize,
     /// Commands per surface and points in the display list.
     pub points: usize,
+    /// Drop a client that has sent no whole frame for this long (an idle
+    /// or trickling connection would keep every other sender out); `None`
+    /// keeps it (a pty has one client for good).
+    pub idle_timeout: Option<Duration>,
 }
+
+/// How long a client may leave the board's answers unread before it is
+/// dropped.
+pub const WRITE_TIMEOUT: Duration = Duration::from_secs(2);
 
 impl Default for DeviceOptions {
     fn default() -> Self {
@@ -54,6 +66,7 @@ impl Default for DeviceOptions {
             slice_bytes: 512 * 512 * 4,
             extent: 4096,
             points: 1 << 19,
+            idle_timeout: None,
         }
     }
 }
@@ -74,13 +87,18 @@ pub trait Port: Read + Write {}
 impl<T: Read + Write> Port for T {}
 
 /// Why [`Board::serve`] returned.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Stop {
     /// `exit_after` volumes were shown.
     Done,
     /// The other end closed the port (TCP); the board keeps its picture
     /// for the next connection.
     Closed,
+    /// The connection failed (reset, broken), sent nothing whole for
+    /// [`DeviceOptions::idle_timeout`], or left the answers unread for
+    /// [`WRITE_TIMEOUT`]: why. The board keeps its picture (a transfer left
+    /// half done times out) for the next connection.
+    Lost(String),
 }
 
 /// The virtual board: the engine and its clock, across connections.
@@ -120,23 +138,29 @@ impl<'a> Board<'a> {
         &self.engine
     }
 
-    /// Write the engine's queued answers to the port.
-    fn answer(&mut self, port: &mut dyn Port, out: &mut [u8]) -> Result<()> {
+    /// Write the engine's queued answers to the port; `Err` says why the
+    /// client is lost.
+    fn answer(&mut self, port: &mut dyn Port, out: &mut [u8]) -> std::result::Result<(), String> {
         loop {
             let n = self.engine.transmit(out);
             if n == 0 {
                 return Ok(());
             }
             let mut rest = &out[..n];
+            let since = Instant::now();
             while !rest.is_empty() {
                 match port.write(rest) {
-                    Ok(0) => anyhow::bail!("the port closed while writing"),
+                    Ok(0) => return Err("the port closed while writing".into()),
                     Ok(k) => rest = &rest[k..],
-                    // A non-blocking port with its buffer full: the host is slow to read.
+                    // A non-blocking port with its buffer full: the host is
+                    // slow to read, or does not read at all.
                     Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::Interrupted) => {
+                        if since.elapsed() > WRITE_TIMEOUT {
+                            return Err(format!("the answers went unread for {} s", WRITE_TIMEOUT.as_secs()));
+                        }
                         std::thread::sleep(Duration::from_micros(200));
                     }
-                    Err(e) => return Err(e).context("writing the port"),
+                    Err(e) => return Err(format!("writing the port: {e}")),
                 }
             }
             let _ = port.flush();
@@ -159,7 +183,19 @@ impl<'a> Board<'a> {
         let mut out = vec![0u8; 4096];
         let mut allowance = 0.0f64;
         let mut last = Instant::now();
+        // When the client last completed a frame (or connected).
+        let (mut frames, mut heard) = (self.engine.counters().frames, Instant::now());
         loop {
+            if let Some(idle) = opts.idle_timeout {
+                let now_frames = self.engine.counters().frames;
+                if now_frames != frames {
+                    (frames, heard) = (now_frames, Instant::now());
+                } else if heard.elapsed() > idle {
+                    // Its transfer, if any, times out in the engine.
+                    self.engine.update(ms(Instant::now()));
+                    return Ok(Stop::Lost(format!("no whole frame for {:.1} s", idle.as_secs_f64())));
+                }
+            }
             let now = Instant::now();
             let budget = if opts.baud == 0 {
                 buf.len()
@@ -181,14 +217,16 @@ impl<'a> Board<'a> {
                             e.kind(),
                             ErrorKind::WouldBlock | ErrorKind::Interrupted | ErrorKind::TimedOut
                         ) => {}
-                    Err(e) => return Err(e).context("reading the port"),
+                    Err(e) => return Ok(Stop::Lost(format!("reading the port: {e}"))),
                 }
             }
             if got > 0 {
                 allowance -= got as f64;
                 let feed_start = Instant::now();
                 self.engine.feed(&buf[..got], ms(feed_start));
-                self.answer(port, &mut out)?;
+                if let Err(why) = self.answer(port, &mut out) {
+                    return Ok(Stop::Lost(why));
+                }
                 while let Some(ev) = self.engine.next_event() {
                     if matches!(ev, Event::Committed { .. }) {
                         self.committed_at = Some(feed_start);
@@ -199,7 +237,9 @@ impl<'a> Board<'a> {
             }
             let redrawn = self.engine.update(ms(Instant::now()));
             // A status follows a new picture, an abandoned transfer answers late.
-            self.answer(port, &mut out)?;
+            if let Err(why) = self.answer(port, &mut out) {
+                return Ok(Stop::Lost(why));
+            }
             if redrawn {
                 let mut shown_volume = false;
                 while let Some(ev) = self.engine.next_event() {
@@ -259,5 +299,74 @@ fn snapshot(engine: &Engine<'_>, size: u32, path: &Path) -> Result<()> {
     let tmp = path.with_extension("png.tmp");
     screen.write_png(&tmp).with_context(|| format!("cannot write {}", tmp.display()))?;
     std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(())
+}
+
+/// A connection the acceptor took, or turned away.
+enum Arrival {
+    Client(TcpStream, SocketAddr),
+    TurnedAway(SocketAddr),
+}
+
+/// Serve TCP clients on `listener` one at a time, for good (or until
+/// `exit_after` volumes are shown): a client that leaves badly (reset,
+/// broken pipe), idles past [`DeviceOptions::idle_timeout`] or leaves the
+/// answers unread is dropped and logged, and the board, its picture kept,
+/// takes the next. A client that connects while another is served is told
+/// the board is busy (a `Nack` with `Busy` before any `Hello`) and closed.
+///
+/// # Errors
+/// Writing the log, a snapshot or the samples file.
+pub fn serve_tcp(
+    board: &mut Board<'_>,
+    listener: TcpListener,
+    opts: &DeviceOptions,
+    log: &mut dyn Write,
+) -> Result<()> {
+    let serving = Arc::new(AtomicBool::new(false));
+    let (tx, rx) = mpsc::channel();
+    let busy = Arc::clone(&serving);
+    std::thread::spawn(move || {
+        for conn in listener.incoming() {
+            let Ok(mut stream) = conn else { continue };
+            let Ok(peer) = stream.peer_addr() else { continue };
+            let arrival = if busy.swap(true, Ordering::AcqRel) {
+                let mut buf = [0u8; 32];
+                let msg =
+                    isoscope_core::wire::Message::Nack { seq: 0, code: isoscope_core::wire::NackCode::Busy };
+                if let Ok(frame) = isoscope_core::wire::encode(&msg, &mut buf) {
+                    let _ = stream.write_all(frame);
+                    let _ = stream.flush();
+                }
+                Arrival::TurnedAway(peer)
+            } else {
+                Arrival::Client(stream, peer)
+            };
+            if tx.send(arrival).is_err() {
+                return;
+            }
+        }
+    });
+    for arrival in rx {
+        match arrival {
+            Arrival::TurnedAway(peer) => {
+                writeln!(log, "{} turned away {peer}: busy with another client", board.stamp())?
+            }
+            Arrival::Client(mut stream, peer) => {
+                let _ = stream.set_nodelay(true);
+                stream.set_nonblocking(true).context("setting up a connection")?;
+                writeln!(log, "{} connected {peer}", board.stamp())?;
+                log.flush()?;
+                let stop = board.serve(&mut stream, opts, log)?;
+                serving.store(false, Ordering::Release);
+                match stop {
+                    Stop::Done => return Ok(()),
+                    Stop::Closed => writeln!(log, "{} disconnected {peer}", board.stamp())?,
+                    Stop::Lost(why) => writeln!(log, "{} dropped {peer}: {why}", board.stamp())?,
+                }
+            }
+        }
+        log.flush()?;
+    }
     Ok(())
 }

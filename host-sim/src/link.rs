@@ -323,9 +323,14 @@ fn handshake(w: &mut impl Write, l: &Listener) -> Result<BoardInfo> {
                         display_points,
                     });
                 }
+                Ok(Reply::Msg(OwnedReply::Nack(_, NackCode::Busy))) if firmware.is_none() => {
+                    bail!("the board is busy with another client; try again once it is done")
+                }
                 Ok(_) => {}
                 Err(RecvTimeoutError::Timeout) => break,
-                Err(RecvTimeoutError::Disconnected) => bail!("the port closed"),
+                Err(RecvTimeoutError::Disconnected) => {
+                    bail!("the board closed the connection before it said hello")
+                }
             }
         }
     }

@@ -141,6 +141,10 @@ struct DeviceArgs {
     /// Exit after this many volumes are shown.
     #[arg(long, value_name = "N")]
     exit_after: Option<u32>,
+    /// With --tcp: drop a client that sends no whole frame for this many
+    /// seconds (so an idle or trickling one cannot keep others out).
+    #[arg(long, value_name = "SECONDS", default_value_t = 10.0, value_parser = parse_timeout)]
+    idle_timeout: f64,
     /// Be this board: its capacities and sample clock (f407: the
     /// firmware's STM32F407). Without it, the sizes below.
     #[arg(long, value_name = "NAME", value_parser = parse_board, conflicts_with_all = ["max_slice_bytes", "points"])]
@@ -375,6 +379,25 @@ struct ContourArgs {
     /// View settings (for --format svg).
     #[command(flatten)]
     view: ViewArgs,
+}
+
+/// Write `text` to standard output. A reader that went away (`| head`)
+/// is not an error: the output is simply not wanted any more.
+fn print_out(text: &str) -> Result<()> {
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        r => r.context("cannot write to standard output"),
+    }
+}
+
+/// A timeout in seconds: finite, 0.1 to one day.
+fn parse_timeout(s: &str) -> Result<f64, String> {
+    let x: f64 = s.trim().parse().map_err(|_| format!("`{s}` is not a number of seconds"))?;
+    if !(0.1..=86_400.0).contains(&x) {
+        return Err(format!("`{s}`: give 0.1 to 86400 seconds"));
+    }
+    Ok(x)
 }
 
 /// A board named in the core ([`Board::ALL`]).
@@ -815,13 +838,13 @@ fn send(args: &SendArgs) -> Result<()> {
         report.throughput() / 1e3,
         report.efficiency(args.baud) * 100.0
     );
-    print!("{}", report.report(args.baud));
+    print_out(&report.report(args.baud))?;
     Ok(())
 }
 
 fn device(args: &DeviceArgs) -> Result<()> {
     use isoscope_sim::board::{HostBuffers, host_capacity};
-    use isoscope_sim::device::{Board as VirtualBoard, DeviceOptions, Stop};
+    use isoscope_sim::device::{Board as VirtualBoard, DeviceOptions};
     let mut opts = DeviceOptions {
         baud: args.baud,
         snapshot: args.snapshot.clone(),
@@ -848,16 +871,8 @@ fn device(args: &DeviceArgs) -> Result<()> {
             std::net::TcpListener::bind(addr).with_context(|| format!("cannot listen on {addr}"))?;
         writeln!(log, "{}", listener.local_addr()?)?;
         log.flush()?;
-        loop {
-            let (mut stream, peer) = listener.accept().context("accepting a connection")?;
-            stream.set_nodelay(true)?;
-            stream.set_nonblocking(true)?;
-            writeln!(log, "connected {peer}")?;
-            if board.serve(&mut stream, &opts, &mut log)? == Stop::Done {
-                return Ok(());
-            }
-            writeln!(log, "disconnected {peer}")?;
-        }
+        opts.idle_timeout = Some(std::time::Duration::from_secs_f64(args.idle_timeout));
+        return isoscope_sim::device::serve_tcp(&mut board, listener, &opts, &mut log);
     }
     let pty = isoscope_sim::tty::open_pty()?;
     writeln!(log, "{}", pty.path.display())?;
@@ -869,7 +884,7 @@ fn device(args: &DeviceArgs) -> Result<()> {
 
 fn stats(args: &StatsArgs) -> Result<()> {
     let scene = build_scene(args, false)?;
-    print!("{}", scene.report());
+    print_out(&scene.report())?;
     Ok(())
 }
 
@@ -899,7 +914,7 @@ fn main() -> ExitCode {
         Cmd::Send(a) => send(a),
         Cmd::Device(a) => device(a),
         Cmd::Info(a) => {
-            load(&a.source).map(|(v, _)| print!("{}", isoscope_sim::info::summarize(&v, a.bins).report()))
+            load(&a.source).and_then(|(v, _)| print_out(&isoscope_sim::info::summarize(&v, a.bins).report()))
         }
     };
     match r {

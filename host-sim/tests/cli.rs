@@ -776,3 +776,34 @@ fn board_preset_says_what_the_board_cannot_hold() {
         assert!(!err.contains("Connection refused"), "{cmd} tried the port: {err}");
     }
 }
+
+/// A reader that goes away (`| head`) ends the output quietly; a full
+/// disk is a plain error; neither panics.
+#[test]
+fn closed_pipes_and_full_disks_do_not_panic() {
+    for args in [&["stats", "--demo", "hydrogen:16"][..], &["info", "--demo", "hydrogen:16"]] {
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_isoscope-sim"))
+            .args(args)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        // The reader leaves before the first line.
+        drop(child.stdout.take());
+        let out = child.wait_with_output().unwrap();
+        let err = text(&out.stderr);
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+        assert!(out.status.success(), "{args:?}: {err}");
+        if std::path::Path::new("/dev/full").exists() {
+            let full = std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
+            let out = std::process::Command::new(env!("CARGO_BIN_EXE_isoscope-sim"))
+                .args(args)
+                .stdout(full)
+                .output()
+                .unwrap();
+            let err = text(&out.stderr);
+            assert!(!out.status.success());
+            assert!(err.starts_with("isoscope-sim: error: cannot write to standard output"), "{err}");
+        }
+    }
+}
