@@ -395,6 +395,9 @@ pub fn volume_messages<'v>(
     view.into_iter().chain(core::iter::once(begin)).chain(data).chain(core::iter::once(end))
 }
 
+/// Go-backs without progress after which `send_volume` gives up.
+pub const MAX_STALLS: u32 = 64;
+
 /// Stream `vol` to the board behind `reader`/`writer`.
 ///
 /// # Errors
@@ -435,7 +438,13 @@ where
     let seq = |k: usize| seq0.wrapping_add(k as u16);
     let frames = volume_messages(vol, cfg, levels, seq0).map(|m| frame(&m)).collect::<Result<Vec<_>>>()?;
     let n = frames.len();
+    // The window shrinks by half at each damaged frame and grows back by
+    // one at each acknowledgement; answers are matched against the largest.
     let window = cfg.window.max(1);
+    let mut win = window;
+    // Go-backs since the oldest frame in flight last advanced: past
+    // MAX_STALLS the line is too noisy (or the board refuses for good).
+    let mut stalls = 0u32;
     // Round trip allowance: a window of frames on the line, and time for
     // the board to contour a slice.
     let line_s =
@@ -463,7 +472,7 @@ where
     let mut end_sent_at = None;
     let t0 = Instant::now();
     while base < n {
-        while next < n && next < base + window {
+        while next < n && next < base + win {
             writer.write_all(&frames[next]).context("cannot write to the port")?;
             report.wire_bytes += frames[next].len() as u64;
             if ever_sent[next] {
@@ -486,6 +495,8 @@ where
                 }
                 while base < n && acked[base] {
                     base += 1;
+                    stalls = 0;
+                    win = (win + 1).min(window);
                     if let Some(p) = progress {
                         p.inc();
                     }
@@ -509,21 +520,38 @@ where
                             base += 1;
                         }
                     }
-                    // Lost or damaged on the line: go back to the oldest
-                    // unacknowledged frame, once per loss.
+                    // Lost or damaged on the line (a damaged delimiter joins
+                    // two frames into one too long: Oversize), or the board
+                    // busy for a moment: go back to the oldest unacknowledged
+                    // frame, once per loss, with a smaller window after
+                    // damage and a pause after Busy.
                     NackCode::OutOfOrder
                     | NackCode::BadCrc
                     | NackCode::Truncated
                     | NackCode::UnknownMessage
+                    | NackCode::Oversize
                     | NackCode::Busy => {
                         let stale = idx.is_some_and(|i| sent_epoch[i] != epoch);
                         if !stale && next > base {
                             epoch += 1;
                             next = base;
+                            stalls += 1;
+                            if stalls > MAX_STALLS {
+                                bail!(
+                                    "frame {} of {n} was sent {stalls} times without an acknowledgement \
+                                     (last answer: {code:?}): the line is too noisy or the board keeps \
+                                     refusing; try a lower --baud, a smaller --chunk or --window",
+                                    base + 1
+                                );
+                            }
+                            if code == NackCode::Busy {
+                                // 10, 20, 40 ... 200 ms.
+                                let pause = 10u64 << stalls.min(6);
+                                std::thread::sleep(Duration::from_millis(pause.min(200)));
+                            } else if code != NackCode::OutOfOrder {
+                                win = (win / 2).max(1);
+                            }
                         }
-                    }
-                    NackCode::Oversize => {
-                        bail!("the board's frame buffer is smaller than {} data bytes", cfg.chunk)
                     }
                     NackCode::BadVersion => {
                         bail!("the board does not speak protocol version {PROTOCOL_VERSION}")
@@ -554,6 +582,7 @@ where
                 }
                 epoch += 1;
                 next = base;
+                win = (win / 2).max(1);
             }
             Err(RecvTimeoutError::Disconnected) => bail!("the port closed"),
         }

@@ -269,3 +269,93 @@ fn send_reports_plain_errors() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("not a serial port"), "{err}");
 }
+
+/// A line that damages one byte in a thousand towards the board (and loses
+/// one answer batch in twenty back): every transfer still completes, with
+/// the exact surface of a clean line (issue 16: at 1e-3 they all failed,
+/// a damaged delimiter's `Oversize` ending the transfer).
+#[test]
+fn a_line_damaging_one_byte_in_a_thousand_still_delivers_the_surface() {
+    let (vol, values) = demo(20);
+    let want = {
+        let volume = Volume::new(&values, 20, 20, 20).unwrap();
+        let mut keep = Keep(Vec::new());
+        contour_volume(&volume, Planes::ALL, &[0.1], Traversal::Corrected, &mut keep).unwrap();
+        segments(keep.0.into_iter(), Geometry::shift_for([20, 20, 20]))
+    };
+    for (seed, chunk) in
+        [(0x9E37_79B9_7F4A_7C15u64, 1024), (0x2545_F491_4F6C_DD1D, 256), (0xDEAD_BEEF_CAFE_F00D, 1024)]
+    {
+        let mem: &'static mut HostBuffers =
+            Box::leak(Box::new(HostBuffers::new(&host_capacity(20 * 20 * 4, 64, 100_000))));
+        let cfg = EngineConfig { merge_tolerance: 0.0, ..EngineConfig::default() };
+        let engine = Arc::new(Mutex::new(Engine::new(cfg, mem.buffers()).unwrap()));
+        let (tx, rx) = channel();
+        let line = Line { engine: engine.clone(), answers: tx, rng: seed, corrupt: 1000, lose: 20, bytes: 0 };
+        let wire = WireVolume::from_loaded(&vol).unwrap();
+        let cfg = SendConfig { levels: vec![0.1], chunk, ..SendConfig::default() };
+        let report = send_volume(Answers(rx, Vec::new()), line, &wire, &cfg, None)
+            .unwrap_or_else(|e| panic!("seed {seed:x}, chunk {chunk}: {e:#}"));
+        assert!(report.retransmitted > 0, "{report:?}");
+        let mut e = engine.lock().unwrap();
+        e.update(u32::MAX / 2);
+        let g = e.surface().expect("a picture");
+        assert_eq!(segments(g.commands(), g.shift()), want, "seed {seed:x}, chunk {chunk}");
+    }
+}
+
+/// A board that says hello and then answers every command with `Busy`:
+/// `send` gives up with a plain error after a bounded number of tries and
+/// a bounded time, instead of retrying for good.
+#[test]
+fn send_gives_up_on_a_board_that_is_always_busy() {
+    use isoscope_core::wire::{Message, NackCode, PROTOCOL_VERSION, ProtocolDecoder, encode};
+    struct Busy {
+        decoder: ProtocolDecoder,
+        answers: Sender<Vec<u8>>,
+    }
+    impl Write for Busy {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            for &b in buf {
+                let reply = match self.decoder.push(b) {
+                    Some(Ok(Message::Hello { .. })) => vec![
+                        Message::Hello { protocol: PROTOCOL_VERSION, firmware: [0; 3] },
+                        Message::Capabilities {
+                            protocol: PROTOCOL_VERSION,
+                            max_slice_samples: 1 << 20,
+                            sample_types: 0xFF,
+                            display_points: 1 << 16,
+                        },
+                    ],
+                    Some(Ok(Message::BeginVolume { seq, .. } | Message::SliceData { seq, .. })) => {
+                        vec![Message::Nack { seq, code: NackCode::Busy }]
+                    }
+                    _ => vec![],
+                };
+                for m in reply {
+                    let mut out = [0u8; 64];
+                    let _ = self.answers.send(encode(&m, &mut out).unwrap().to_vec());
+                }
+            }
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+    let (vol, _) = demo(12);
+    let wire = WireVolume::from_loaded(&vol).unwrap();
+    let (tx, rx) = channel();
+    let board = Busy { decoder: ProtocolDecoder::new(), answers: tx };
+    let cfg = SendConfig { levels: vec![0.1], ..SendConfig::default() };
+    let t0 = std::time::Instant::now();
+    let (done_tx, done_rx) = channel();
+    std::thread::spawn(move || {
+        let r = send_volume(Answers(rx, Vec::new()), board, &wire, &cfg, None);
+        let _ = done_tx.send(r.map(|_| ()).map_err(|e| format!("{e:#}")));
+    });
+    let result = done_rx.recv_timeout(Duration::from_secs(90)).expect("send still retrying after 90 s");
+    let err = result.expect_err("a board that is always busy took the volume");
+    assert!(err.contains("without an acknowledgement") && err.contains("Busy"), "{err}");
+    assert!(t0.elapsed() < Duration::from_secs(60), "{:?}", t0.elapsed());
+}
