@@ -3,8 +3,9 @@
 //!
 //! The volume goes to an in-process board once ([`crate::scene::with_board`]:
 //! contoured, stitched and ordered by the board's engine); each animation
-//! frame sets the board's view to the next yaw, as `send --yaw` would (the
-//! board re-projects its picture; every view fits the surface's bounding
+//! frame sets the board's view to the next yaw, as a `SetView` after the
+//! volume would (the board re-projects the tour it made for the first
+//! view, without ordering again; every view fits the surface's bounding
 //! sphere, so the picture keeps its scale while it turns), and draws the
 //! board's frame on one [`Phosphor`] that keeps
 //! [`PhosphorConfig::persistence`] of the frames before, so a moving line

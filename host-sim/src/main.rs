@@ -152,7 +152,8 @@ struct DeviceArgs {
     /// Largest slice the board takes, in bytes (nx * ny * sample size).
     #[arg(long, default_value_t = 1 << 20)]
     max_slice_bytes: usize,
-    /// Commands each surface holds, and points in the display list.
+    /// Points each of the engine's two surfaces holds (it also gets the
+    /// scratch to stitch and order them, 8 bytes a point).
     #[arg(long, default_value_t = 1 << 19)]
     points: usize,
 }
@@ -624,6 +625,9 @@ fn render(args: &RenderArgs) -> Result<()> {
 fn render_animation(args: &RenderArgs, path: &std::path::Path) -> Result<()> {
     let format = AnimFormat::from_path(path)
         .with_context(|| format!("{}: an animation is a .gif or an (animated) .png", path.display()))?;
+    if args.scene.board.samples.is_some() {
+        bail!("--samples writes one frame: give it to a still render, not with --animate");
+    }
     let (volume, cfg) = prepare(
         &args.scene.input,
         &args.scene.view,
@@ -800,6 +804,8 @@ fn send(args: &SendArgs) -> Result<()> {
             };
             preview.view = View { yaw, pitch, roll, projection, ..preview.view };
         }
+        // The settings first, so that their errors say what they are.
+        preview.send()?;
         let scene = scene::build(&wire, &preview)
             .with_context(|| format!("the {} board cannot take this volume", board.name))?;
         for r in scene.remarks() {

@@ -1,7 +1,7 @@
 //! A frame on the host, exactly as a board draws it: the volume goes to an
 //! in-process board ([`crate::board::InProcess`]) as the frames `send`
-//! puts on the wire; the board's engine contours, culls, stitches, merges
-//! and orders it in 3D in its bounded memory, and its frame
+//! puts on the wire; the board's engine contours, culls, stitches, merges,
+//! splices and orders it in its bounded memory, and its frame
 //! ([`isoscope_core::engine::Engine::frame`]) is the samples the firmware
 //! plays. There is no other picture pipeline on the host.
 //!

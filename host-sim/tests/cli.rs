@@ -807,3 +807,34 @@ fn closed_pipes_and_full_disks_do_not_panic() {
         }
     }
 }
+
+/// `--samples` writes one frame, so an animation refuses it rather than
+/// ignore it; `send --board` says what is wrong with its own options.
+#[test]
+fn options_that_cannot_apply_are_refused_plainly() {
+    let out = run(&[
+        "render",
+        "--demo",
+        "hydrogen:8",
+        "--animate",
+        "/tmp/isoscope-never.gif",
+        "--samples",
+        "/tmp/x",
+    ]);
+    assert!(!out.status.success());
+    assert!(text(&out.stderr).contains("--samples writes one frame"), "{}", text(&out.stderr));
+    let out = run(&[
+        "send",
+        "--demo",
+        "hydrogen:8",
+        "--board",
+        "f407",
+        "--every",
+        "0",
+        "--port",
+        "tcp:127.0.0.1:1",
+    ]);
+    assert!(!out.status.success());
+    let err = text(&out.stderr);
+    assert!(err.contains("the slice stride must be at least 1") && !err.contains("cannot take"), "{err}");
+}

@@ -1,7 +1,7 @@
 //! One picture pipeline: for the same volume, levels, planes, stride, view,
 //! beam and memory, the virtual board (`device`, fed by the real `send`
-//! over TCP), `render --samples`, `stats --samples` and `wav --samples`
-//! (before resampling to audio) write the very same DAC samples, byte for
+//! over TCP), `render --samples`, `stats --samples` and `wav --scope-beam
+//! --samples` (before resampling to audio) write the very same DAC samples, byte for
 //! byte. Scenes: the four demos at two views, a real MRI file, a surface
 //! larger than the board holds, and a perspective view; all with the
 //! STM32F407's memory (`--board f407`), one also with the host's.

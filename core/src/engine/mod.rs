@@ -14,10 +14,14 @@
 //!   complete (so an aborted, corrupt or abandoned transfer never costs it),
 //!   and the one being received (whose pieces go on, once it is full, in
 //!   the slice memory the volume's slices leave free);
-//! - when a volume is complete, stitches and orders it in 3D into the
-//!   picture ([`ChainStats`]; the idle slice buffers are the scratch), so
-//!   that any view draws it with short jumps: a new view, or a spinning
-//!   one, costs no more than projecting each point as the beam reaches it.
+//! - when a volume is complete, runs the path pipeline ([`crate::path`]:
+//!   cull, stitch, merge, splice crossing loops, tour) into the picture
+//!   ([`ChainStats`]; the idle slice buffers are the scratch), the tour
+//!   made for the screen of the view in force (in space while the view
+//!   spins); a later view draws the same tour, costing no more than
+//!   projecting each point as the beam reaches it (in space, a projection
+//!   never lengthens a jump; a tour made for one screen has no such bound
+//!   on another).
 //!
 //! What it answers is queued as bytes for the UART ([`Engine::transmit`]):
 //! an `Ack` or `Nack` for every command, and a `Status` once a new volume's

@@ -338,6 +338,8 @@ impl Tour {
             }
             if let Some((_, k, flip)) = best {
                 let dest = self.relocate(x, i, len, k, flip);
+                // The steps shifted (and placed again) count too.
+                *budget = budget.saturating_sub(i.abs_diff(dest) as u64 + len as u64);
                 if let Some(near) = near {
                     near.place(x, self, i.min(dest), last.max(dest + len - 1));
                 }
@@ -350,8 +352,9 @@ impl Tour {
     /// The tour made again on the screen: from the start, the step with the
     /// end nearest the last exit next, entered there; the nearest found in
     /// rings of cells around it, the steps already placed taken out of the
-    /// lists as they are passed. Returns false (the tour as it was) when the
-    /// budget runs out first.
+    /// lists as they are passed. Returns false when the budget runs out
+    /// first: the tour is then a permutation still (part made again), its
+    /// jumps not measured, and the screen grid's lists are spent.
     fn nearest_on_screen(&self, x: &mut Index<'_, '_>, near: &Near, budget: &mut u64) -> bool {
         let Metric::Screen { view, shift, park } = self.metric else { return false };
         let n = self.len;
@@ -372,6 +375,7 @@ impl Tour {
                     let edge = yy + r == cy || yy == cy + r;
                     let mut xx = x0;
                     while xx <= x1 {
+                        *budget = budget.saturating_sub(1);
                         let c = near.heads + xx + gx * yy;
                         // Walk the cell's list, unlinking the placed ends.
                         let (mut prev, mut at) = (NONE, x.w.get(c));
@@ -465,6 +469,7 @@ impl Tour {
             );
             if let Some(j) = found {
                 self.reverse(x, i + 1, j);
+                *budget = budget.saturating_sub((j - i) as u64);
                 self.measure(x, i);
                 if j + 1 < n {
                     self.measure(x, j);
@@ -500,6 +505,7 @@ impl Tour {
             );
             if let Some(l) = found {
                 self.reverse(x, l, i);
+                *budget = budget.saturating_sub((i - l + 1) as u64);
                 self.measure(x, l - 1);
                 self.measure(x, i);
                 near.place(x, self, l, i);
@@ -672,7 +678,16 @@ impl Tour {
                         best = (c, i);
                     }
                 }
-                self.set(&mut x.w, k, best.1, best.1);
+                if best.1 != end {
+                    self.set(&mut x.w, k, best.1, best.1);
+                    // The jumps into and out of it, kept with the steps.
+                    if k > 0 {
+                        self.measure(x, k - 1);
+                    }
+                    if k + 1 < self.len {
+                        self.measure(x, k);
+                    }
+                }
             }
             prev = Some(self.ends(x, k).1);
         }
