@@ -140,8 +140,13 @@ impl Host {
         self.seq
     }
 
-    fn hello() -> Vec<u8> {
-        frame(&Message::Hello { protocol: PROTOCOL_VERSION, firmware: [0, 0, 0] })
+    /// `Hello`, announcing this host's next command.
+    fn hello(&self) -> Vec<u8> {
+        frame(&Message::Hello {
+            protocol: PROTOCOL_VERSION,
+            firmware: [0, 0, 0],
+            seq: self.seq.wrapping_add(1),
+        })
     }
 
     fn begin(&mut self, v: &Vol) -> Vec<u8> {
@@ -189,7 +194,7 @@ impl Host {
 
     /// Hello, then the whole volume.
     fn volume(&mut self, v: &Vol) -> Vec<u8> {
-        let mut out = Self::hello();
+        let mut out = self.hello();
         out.extend(self.begin(v));
         out.extend(self.slices(v, MAX_CHUNK).concat());
         out.extend(self.end());
@@ -212,7 +217,7 @@ fn answers(e: &mut Engine<'_>) -> Vec<Message<'static>> {
                 Message::Status { seq, state, slices, points, refresh_centi_hz } => {
                     Message::Status { seq, state, slices, points, refresh_centi_hz }
                 }
-                Message::Hello { protocol, firmware } => Message::Hello { protocol, firmware },
+                Message::Hello { protocol, firmware, seq } => Message::Hello { protocol, firmware, seq },
                 Message::Capabilities { protocol, max_slice_samples, sample_types, display_points } => {
                     Message::Capabilities { protocol, max_slice_samples, sample_types, display_points }
                 }
@@ -310,7 +315,7 @@ fn streaming_equals_whole_volume_contouring_for_every_sample_type() {
         let mut e = engine(&mut mem);
         let mut host = Host::new();
         // Odd chunk sizes, so that chunks straddle rows.
-        let mut bytes = Host::hello();
+        let mut bytes = host.hello();
         bytes.extend(host.begin(&v));
         bytes.extend(host.slices(&v, 333).concat());
         bytes.extend(host.end());
@@ -349,7 +354,7 @@ fn every_command_is_answered_in_order_and_status_follows_the_end() {
     let mut mem = big();
     let mut e = engine(&mut mem);
     let mut host = Host::new();
-    e.feed(&Host::hello(), 0);
+    e.feed(&host.hello(), 0);
     let hi = answers(&mut e);
     assert!(matches!(hi[0], Message::Hello { protocol: PROTOCOL_VERSION, .. }));
     assert!(matches!(hi[1], Message::Capabilities { max_slice_samples: 16384, display_points: 200_000, .. }));
@@ -389,7 +394,7 @@ fn a_slowed_sample_clock_is_reported_in_the_refresh_rate() {
     let centi = |hz: u32| ((hz as f32 / samples as f32) * 100.0) as u16;
     let status = |e: &mut Engine<'_>| {
         answers(e);
-        e.feed(&Host::hello(), 2);
+        e.feed(&Host::new().hello(), 2);
         answers(e).into_iter().find_map(|m| match m {
             Message::Status { refresh_centi_hz, .. } => Some(refresh_centi_hz),
             _ => None,
@@ -501,7 +506,7 @@ fn picture_survives(bad: impl FnOnce(&mut Engine<'_>, &mut Host, &Vol)) -> Vec<E
 #[test]
 fn corrupt_crc_is_nacked_and_retransmission_recovers() {
     picture_survives(|e, host, b| {
-        e.feed(&Host::hello(), 1);
+        e.feed(&host.hello(), 1);
         e.feed(&host.begin(b), 1);
         let chunks = host.slices(b, 500);
         let mut bad = chunks[3].clone();
@@ -686,7 +691,7 @@ fn retransmitted_commands_are_answered_again_not_applied_twice() {
     let mut mem = big();
     let mut e = engine(&mut mem);
     let mut host = Host::new();
-    e.feed(&Host::hello(), 0);
+    e.feed(&host.hello(), 0);
     let begin = host.begin(&v);
     e.feed(&begin, 0);
     let chunks = host.slices(&v, 64);
@@ -795,7 +800,7 @@ fn levels_and_beam_settings() {
     let mut mem = big();
     let mut e = engine(&mut mem);
     let mut host = Host::new();
-    e.feed(&Host::hello(), 0);
+    e.feed(&host.hello(), 0);
     let seq = host.next();
     e.feed(&frame(&Message::SetLevels { seq, levels: Levels::from_slice(&[100.0]).unwrap() }), 0);
     // A volume with no levels of its own takes them.
@@ -1158,7 +1163,7 @@ fn a_transfer_that_stops_mid_job_times_out_and_keeps_the_picture() {
     assert!(e.update(0));
     let before = picture(&e);
     let mut host = Host::new();
-    let mut bytes = Host::hello();
+    let mut bytes = host.hello();
     bytes.extend(host.begin(&b));
     bytes.extend(host.first_slices(&b, MAX_CHUNK, 3).concat());
     {
@@ -1186,7 +1191,7 @@ fn contour_while_does_one_whole_row_a_call_when_told_to_stop() {
     let mut mem = big();
     let mut e = deferring(&mut mem);
     let mut host = Host::new();
-    let mut bytes = Host::hello();
+    let mut bytes = host.hello();
     bytes.extend(host.begin(&v));
     bytes.extend(host.slices(&v, MAX_CHUNK).concat());
     bytes.extend(host.end());

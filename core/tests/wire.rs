@@ -19,7 +19,11 @@ const SLICE: [u8; 5] = [0, 1, 2, 0xFF, 0];
 
 fn golden() -> Vec<(&'static str, Message<'static>, &'static str)> {
     vec![
-        ("hello", Message::Hello { protocol: 1, firmware: [0, 3, 2] }, "020102010703028c27010700"),
+        (
+            "hello",
+            Message::Hello { protocol: 1, firmware: [0, 3, 2], seq: 300 },
+            "02020201090302ac02f8e2d61100",
+        ),
         (
             "capabilities",
             Message::Capabilities {
@@ -28,7 +32,7 @@ fn golden() -> Vec<(&'static str, Message<'static>, &'static str)> {
                 sample_types: 0x0F,
                 display_points: 4000,
             },
-            "0e0101018080040fa01ffbcec89300",
+            "0e0201018080040fa01f3ef245aa00",
         ),
         (
             "begin_volume",
@@ -41,18 +45,18 @@ fn golden() -> Vec<(&'static str, Message<'static>, &'static str)> {
                 axes: AXIS_X | AXIS_Z,
                 every: 4,
             },
-            "090102014040ac02020103803f0103803f01042040020103c84201097a440504b549c18100",
+            "090202014040ac02020103803f0103803f01042040020103c84201097a440504c670e99200",
         ),
         (
             "slice_data",
             Message::SliceData { seq: 2, slice: 17, offset: 300, data: &SLICE },
-            "0801030211ac0205040102ff052e5670d400",
+            "0802030211ac0205040102ff05de84eea300",
         ),
-        ("end_volume", Message::EndVolume { seq: 130 }, "0901048201fada43e000"),
+        ("end_volume", Message::EndVolume { seq: 130 }, "09020482011475f6f200"),
         (
             "set_levels",
             Message::SetLevels { seq: 3, levels: Levels::from_slice(&[0.5]).unwrap() },
-            "05010503010101063f738622f600",
+            "05020503010101063f9081ad7800",
         ),
         (
             "set_view",
@@ -64,15 +68,15 @@ fn golden() -> Vec<(&'static str, Message<'static>, &'static str)> {
                 fov_deg: 0.0,
                 spin_deg_per_s: 10.0,
             },
-            "040106040103f041010370c10101010101010101010720410dc7798a00",
+            "040206040103f041010370c101010101010101010107204130fe9cfc00",
         ),
         (
             "set_beam",
             Message::SetBeam { seq: 5, lit_step: 64, dwell_us: 2, settle_us: 20 },
-            "0b0107054002141b6516a700",
+            "0b020705400214b517822100",
         ),
-        ("ack", Message::Ack { seq: 7 }, "080108078eac3ea800"),
-        ("nack", Message::Nack { seq: 8, code: NackCode::OutOfOrder }, "0901090806cbac93b700"),
+        ("ack", Message::Ack { seq: 7 }, "08020807d71278aa00"),
+        ("nack", Message::Nack { seq: 8, code: NackCode::OutOfOrder }, "0902090806250326a500"),
         (
             "status",
             Message::Status {
@@ -82,7 +86,7 @@ fn golden() -> Vec<(&'static str, Message<'static>, &'static str)> {
                 points: 4000,
                 refresh_centi_hz: 5000,
             },
-            "0f010a0902ac02a01f8827415be90900",
+            "0f020a0902ac02a01f882742e0dee200",
         ),
     ]
 }
@@ -137,12 +141,13 @@ fn all_golden_frames_back_to_back_with_feed() {
 
 #[test]
 fn worked_example_by_hand() {
-    // Ack { seq: 7 }: version 01, variant 8 (varint 08), seq 7 (varint 07).
-    let body = [0x01, 0x08, 0x07];
-    assert_eq!(crc32(&body), 0xA83E_AC8E);
+    // Ack { seq: 7 }: version 02, variant 8 (varint 08), seq 7 (varint 07).
+    let body = [0x02, 0x08, 0x07];
+    assert_eq!(crc32(&body), 0xAA78_12D7);
     assert_eq!(crc32(b"123456789"), 0xCBF4_3926); // the CRC-32 check value
     // No zeros: one COBS block of 7 bytes, code 0x08, then the delimiter.
-    assert_eq!(hex("080108078eac3ea800"), [8, 1, 8, 7, 0x8E, 0xAC, 0x3E, 0xA8, 0]);
+    assert_eq!(hex("08020807d71278aa00"), [8, 2, 8, 7, 0xD7, 0x12, 0x78, 0xAA, 0]);
+    assert_eq!(encode(&Message::Ack { seq: 7 }, &mut [0u8; 16]).unwrap(), hex("08020807d71278aa00"));
 }
 
 #[test]
@@ -158,11 +163,11 @@ fn buffer_too_small_for_every_shorter_buffer() {
 
 #[test]
 fn corrupt_crc_is_bad_crc() {
-    let mut frame = hex("080108078eac3ea800");
+    let mut frame = hex("08020807d71278aa00");
     frame[5] ^= 0x01;
     assert_eq!(decode_all(&mut FrameDecoder::<64>::new(), &frame), vec![Err(WireError::BadCrc)]);
     // A flipped payload bit also fails the CRC.
-    let mut frame = hex("080108078eac3ea800");
+    let mut frame = hex("08020807d71278aa00");
     frame[3] ^= 0x10;
     assert_eq!(decode_all(&mut FrameDecoder::<64>::new(), &frame), vec![Err(WireError::BadCrc)]);
 }
@@ -170,7 +175,7 @@ fn corrupt_crc_is_bad_crc() {
 #[test]
 fn truncated_frames() {
     // Cut inside a COBS block: the block runs past the delimiter.
-    let frame = hex("080108078eac3ea800");
+    let frame = hex("08020807d71278aa00");
     let mut cut = frame[..5].to_vec();
     cut.push(0);
     assert_eq!(decode_all(&mut FrameDecoder::<64>::new(), &cut), vec![Err(WireError::BadCobs)]);
@@ -180,7 +185,7 @@ fn truncated_frames() {
         vec![Err(WireError::Truncated)]
     );
     // Cut on a block boundary: decodes, but the CRC is wrong.
-    let frame = hex("040106040103f041010370c10101010101010101010720410dc7798a00");
+    let frame = hex("040206040103f041010370c101010101010101010107204130fe9cfc00");
     let mut cut = frame[..12].to_vec();
     cut.push(0);
     assert_eq!(decode_all(&mut FrameDecoder::<64>::new(), &cut), vec![Err(WireError::BadCrc)]);
@@ -203,7 +208,7 @@ fn truncated_frames() {
 #[test]
 fn oversize_frame_then_recovery() {
     let big = hex(golden()[2].2); // begin_volume: 36 bytes
-    let ack = hex("080108078eac3ea800");
+    let ack = hex("08020807d71278aa00");
     let mut dec = FrameDecoder::<16>::new();
     let stream: Vec<u8> = [&big[..], &ack[..], &big[..], &ack[..]].concat();
     assert_eq!(
@@ -224,8 +229,8 @@ fn oversize_frame_then_recovery() {
 
 #[test]
 fn garbage_between_frames_is_skipped() {
-    let ack = hex("080108078eac3ea800");
-    let end = hex("0901048201fada43e000");
+    let ack = hex("08020807d71278aa00");
+    let end = hex("09020482011475f6f200");
     let stream: Vec<u8> = [&b"\x00\x00noise"[..], &[0], &ack, &[0, 0, 0], b"more junk\x00", &end].concat();
     let got = decode_all(&mut FrameDecoder::<64>::new(), &stream);
     let msgs: Vec<_> = got.iter().filter(|r| r.is_ok()).cloned().collect();
@@ -244,8 +249,9 @@ fn garbage_between_frames_is_skipped() {
 #[test]
 fn wrong_version_is_bad_version() {
     assert_eq!(
-        decode_all(&mut FrameDecoder::<64>::new(), &hex("08020807d71278aa00")),
-        vec![Err(WireError::BadVersion { got: 2 })]
+        // Ack { seq: 7 } of protocol version 1.
+        decode_all(&mut FrameDecoder::<64>::new(), &hex("080108078eac3ea800")),
+        vec![Err(WireError::BadVersion { got: 1 })]
     );
 }
 
@@ -253,11 +259,11 @@ fn wrong_version_is_bad_version() {
 fn unknown_messages() {
     for frame in [
         // SetLevels with 9 levels.
-        "05010503090103803f0103803f0103803f0103803f0103803f0103803f0103803f0103803f0107803f1e2bb5bc00",
+        "05020503090103803f0103803f0103803f0103803f0103803f0103803f0103803f0103803f0107803f969b099600",
         // Variant 11.
-        "08010b03543b7e8400",
+        "08020b030d85388600",
         // Ack with a trailing byte.
-        "0901080701904fadaf00",
+        "09020807017ee018bd00",
     ] {
         assert_eq!(
             decode_all(&mut FrameDecoder::<64>::new(), &hex(frame)),
@@ -281,8 +287,8 @@ impl XorShift {
 fn one_megabyte_of_noise_then_a_frame() {
     let mut rng = XorShift(0x9E37_79B9_7F4A_7C15);
     let noise: Vec<u8> = (0..1 << 20).map(|_| rng.next() as u8).collect();
-    let ack = hex("080108078eac3ea800");
-    let end = hex("0901048201fada43e000");
+    let ack = hex("08020807d71278aa00");
+    let end = hex("09020482011475f6f200");
     // With the documented flush byte: the first frame after the noise decodes.
     let mut dec = FrameDecoder::<256>::new();
     let mut got = decode_all(&mut dec, &noise);
@@ -324,7 +330,7 @@ fn message(
     lv: Levels,
 ) -> Message<'_> {
     match pick % 11 {
-        0 => Message::Hello { protocol: c, firmware: [c, a as u8, b as u8] },
+        0 => Message::Hello { protocol: c, firmware: [c, a as u8, b as u8], seq: a },
         1 => Message::Capabilities {
             protocol: c,
             max_slice_samples: b,

@@ -18,6 +18,7 @@ enum Arb<'a> {
     Hello {
         protocol: u8,
         firmware: [u8; 3],
+        seq: u16,
     },
     Capabilities {
         protocol: u8,
@@ -104,7 +105,7 @@ fn pick<T: Copy>(all: &[T], i: u8) -> T {
 impl<'a> Arb<'a> {
     fn message(&self) -> Message<'a> {
         match *self {
-            Arb::Hello { protocol, firmware } => Message::Hello { protocol, firmware },
+            Arb::Hello { protocol, firmware, seq } => Message::Hello { protocol, firmware, seq },
             Arb::Capabilities { protocol, max_slice_samples, sample_types, display_points } => {
                 Message::Capabilities { protocol, max_slice_samples, sample_types, display_points }
             }

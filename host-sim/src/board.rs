@@ -93,7 +93,7 @@ impl<'a> InProcess<'a> {
         let engine = Engine::new(cfg, mem.buffers()).context("cannot start the engine")?;
         let mut board =
             Self { engine, seq: 0, now_ms: 0, loaded: Loaded::default(), frame: vec![0; MAX_FRAME_LEN] };
-        board.feed(&Message::Hello { protocol: PROTOCOL_VERSION, firmware: [0; 3] })?;
+        board.feed(&Message::Hello { protocol: PROTOCOL_VERSION, firmware: [0; 3], seq: 0 })?;
         Ok(board)
     }
 

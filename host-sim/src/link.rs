@@ -256,7 +256,9 @@ impl Listener {
                     let reply = match r {
                         Err(e) => Reply::Bad(e),
                         Ok(m) => Reply::Msg(match m {
-                            Message::Hello { protocol, firmware } => OwnedReply::Hello { protocol, firmware },
+                            Message::Hello { protocol, firmware, .. } => {
+                                OwnedReply::Hello { protocol, firmware }
+                            }
                             Message::Capabilities {
                                 max_slice_samples, sample_types, display_points, ..
                             } => OwnedReply::Capabilities { max_slice_samples, sample_types, display_points },
@@ -293,9 +295,13 @@ fn frame(msg: &Message<'_>) -> Result<Vec<u8>> {
 }
 
 /// Say hello and read the board's capabilities (three tries).
-fn handshake(w: &mut impl Write, l: &Listener) -> Result<BoardInfo> {
+fn handshake(w: &mut impl Write, l: &Listener, seq0: u16) -> Result<BoardInfo> {
     let mut hello = vec![0u8]; // flush a partial frame in the board
-    hello.extend(frame(&Message::Hello { protocol: PROTOCOL_VERSION, firmware: crate_version() })?);
+    hello.extend(frame(&Message::Hello {
+        protocol: PROTOCOL_VERSION,
+        firmware: crate_version(),
+        seq: seq0,
+    })?);
     for _ in 0..3 {
         w.write_all(&hello).context("cannot write to the port")?;
         w.flush()?;
@@ -419,7 +425,10 @@ where
         bail!("the chunk size must be 1..={MAX_CHUNK} bytes");
     }
     let listener = Listener::start(reader);
-    let board = handshake(&mut writer, &listener)?;
+    // Every command frame, in order, with consecutive sequence numbers from
+    // seq0, which the Hello announces.
+    let seq0 = (Instant::now().elapsed().subsec_nanos() as u16) ^ 0x5A5A;
+    let board = handshake(&mut writer, &listener, seq0)?;
     if board.sample_types & vol.sample_type.bit() == 0 {
         bail!("the board does not take {:?} samples", vol.sample_type);
     }
@@ -433,8 +442,6 @@ where
             board.max_slice_samples
         );
     }
-    // Every command frame, in order, with consecutive sequence numbers.
-    let seq0 = (Instant::now().elapsed().subsec_nanos() as u16) ^ 0x5A5A;
     let seq = |k: usize| seq0.wrapping_add(k as u16);
     let frames = volume_messages(vol, cfg, levels, seq0).map(|m| frame(&m)).collect::<Result<Vec<_>>>()?;
     let n = frames.len();

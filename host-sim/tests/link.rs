@@ -319,7 +319,7 @@ fn send_gives_up_on_a_board_that_is_always_busy() {
             for &b in buf {
                 let reply = match self.decoder.push(b) {
                     Some(Ok(Message::Hello { .. })) => vec![
-                        Message::Hello { protocol: PROTOCOL_VERSION, firmware: [0; 3] },
+                        Message::Hello { protocol: PROTOCOL_VERSION, firmware: [0; 3], seq: 0 },
                         Message::Capabilities {
                             protocol: PROTOCOL_VERSION,
                             max_slice_samples: 1 << 20,
@@ -358,4 +358,79 @@ fn send_gives_up_on_a_board_that_is_always_busy() {
     let err = result.expect_err("a board that is always busy took the volume");
     assert!(err.contains("without an acknowledgement") && err.contains("Busy"), "{err}");
     assert!(t0.elapsed() < Duration::from_secs(60), "{:?}", t0.elapsed());
+}
+
+/// The board side of a line that loses exactly one frame: the `drop`-th
+/// the host writes (counting delimited frames, retransmissions included).
+struct DropOne {
+    engine: Arc<Mutex<Engine<'static>>>,
+    answers: Sender<Vec<u8>>,
+    drop: usize,
+    seen: usize,
+    frame: Vec<u8>,
+    bytes: u64,
+}
+
+impl Write for DropOne {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        for &b in buf {
+            self.frame.push(b);
+            if b != 0 {
+                continue;
+            }
+            let whole = std::mem::take(&mut self.frame);
+            if whole.len() > 1 {
+                self.seen += 1;
+                if self.seen - 1 == self.drop {
+                    continue;
+                }
+            }
+            self.bytes += whole.len() as u64;
+            let now = (self.bytes / 92) as u32;
+            let mut e = self.engine.lock().unwrap();
+            e.feed(&whole, now);
+            e.update(now);
+            let mut out = vec![0u8; 4096];
+            let n = e.transmit(&mut out);
+            if n > 0 {
+                let _ = self.answers.send(out[..n].to_vec());
+            }
+        }
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// Issue 16: the loss of any one frame, the first command's included
+/// (which the board once took as the start of the sequence, then counted
+/// its retransmission a duplicate), is recovered, with the exact surface.
+#[test]
+fn losing_any_one_frame_of_a_transfer_is_recovered() {
+    let (vol, values) = demo(8);
+    let want = {
+        let volume = Volume::new(&values, 8, 8, 8).unwrap();
+        let mut keep = Keep(Vec::new());
+        contour_volume(&volume, Planes::ALL, &[0.1], Traversal::Corrected, &mut keep).unwrap();
+        segments(keep.0.into_iter(), Geometry::shift_for([8, 8, 8]))
+    };
+    let wire = WireVolume::from_loaded(&vol).unwrap();
+    let cfg = SendConfig { levels: vec![0.1], chunk: 128, window: 4, ..SendConfig::default() };
+    // Hello, BeginVolume, 16 chunks, EndVolume.
+    for drop in 0..19 {
+        let mem: &'static mut HostBuffers =
+            Box::leak(Box::new(HostBuffers::new(&host_capacity(8 * 8 * 4, 16, 10_000))));
+        let ecfg = EngineConfig { merge_tolerance: 0.0, ..EngineConfig::default() };
+        let engine = Arc::new(Mutex::new(Engine::new(ecfg, mem.buffers()).unwrap()));
+        let (tx, rx) = channel();
+        let line =
+            DropOne { engine: engine.clone(), answers: tx, drop, seen: 0, frame: Vec::new(), bytes: 0 };
+        let report = send_volume(Answers(rx, Vec::new()), line, &wire, &cfg, None)
+            .unwrap_or_else(|e| panic!("frame {drop} lost: {e:#}"));
+        let mut e = engine.lock().unwrap();
+        e.update(u32::MAX / 2);
+        let g = e.surface().unwrap_or_else(|| panic!("frame {drop} lost: no picture; {report:?}"));
+        assert_eq!(segments(g.commands(), g.shift()), want, "frame {drop} lost");
+    }
 }

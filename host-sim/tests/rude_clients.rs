@@ -91,7 +91,7 @@ fn a_client_that_resets_mid_transfer_leaves_the_board_serving() {
     // Hello, a volume begun and half a slice, then gone with the answers
     // unread: the kernel resets the connection.
     let mut rude = TcpStream::connect(&board.addr).unwrap();
-    rude.write_all(&frame(&Message::Hello { protocol: PROTOCOL_VERSION, firmware: [0; 3] })).unwrap();
+    rude.write_all(&frame(&Message::Hello { protocol: PROTOCOL_VERSION, firmware: [0; 3], seq: 7 })).unwrap();
     let begin = Message::BeginVolume {
         seq: 7,
         dims: [12, 12, 12],
@@ -138,7 +138,7 @@ fn a_trickling_client_is_dropped_too() {
     let mut slow = TcpStream::connect(&board.addr).unwrap();
     board.expect("connected");
     // A byte every 200 ms, never a whole frame.
-    let hello = frame(&Message::Hello { protocol: PROTOCOL_VERSION, firmware: [0; 3] });
+    let hello = frame(&Message::Hello { protocol: PROTOCOL_VERSION, firmware: [0; 3], seq: 7 });
     let t0 = Instant::now();
     let mut dropped = false;
     for &b in hello.iter().take(hello.len() - 1).cycle().take(20) {

@@ -139,11 +139,13 @@ impl Device<'_> {
 
     pub(super) fn handle(&mut self, msg: Message<'_>, now_ms: u32, back: &mut Geometry<'_>) {
         let seq = match msg {
-            Message::Hello { protocol, .. } => {
+            Message::Hello { protocol, seq, .. } => {
                 self.abort(AbortReason::Restarted);
-                self.session.reset();
+                // The host's first command will carry `seq`: a lost one,
+                // the first included, shows as a gap and is sent again.
+                self.session.reset(seq);
                 self.event(Event::Hello { protocol });
-                self.send(&Message::Hello { protocol: PROTOCOL_VERSION, firmware: self.cfg.firmware });
+                self.send(&Message::Hello { protocol: PROTOCOL_VERSION, firmware: self.cfg.firmware, seq });
                 self.send(&Message::Capabilities {
                     protocol: PROTOCOL_VERSION,
                     max_slice_samples: self.stream.slice_capacity().min(u32::MAX as usize) as u32,

@@ -24,8 +24,9 @@ pub(crate) enum Standing {
 /// The receiving side's sequence state.
 #[derive(Debug, Clone)]
 pub(crate) struct Session {
-    /// The `seq` expected next; `None` before the first command after a
-    /// `Hello` (any `seq` starts the session).
+    /// The `seq` expected next: the one a `Hello` announced; `None` before
+    /// any (at power-up, where the board feeds itself its boot volume: any
+    /// `seq` starts the session).
     expect: Option<u16>,
     /// Answers to the last [`REPLAY`] commands, by `seq % REPLAY`.
     answers: [Option<(u16, Option<NackCode>)>; REPLAY],
@@ -38,9 +39,9 @@ impl Session {
         Self { expect: None, answers: [None; REPLAY], last: 0 }
     }
 
-    /// Start afresh (after a `Hello`): the next command's `seq` is taken.
-    pub(crate) fn reset(&mut self) {
-        *self = Self::new();
+    /// Start afresh (after a `Hello`), expecting `first` next.
+    pub(crate) fn reset(&mut self, first: u16) {
+        *self = Self { expect: Some(first), ..Self::new() };
     }
 
     /// The `seq` expected next (0 before the first command).
@@ -102,8 +103,10 @@ mod tests {
         }
         assert_eq!(s.standing(501), Standing::Stale);
         assert_eq!(s.standing(599), Standing::Seen(None));
-        s.reset();
+        s.reset(7);
         assert_eq!(s.standing(7), Standing::Next);
+        assert_eq!(s.standing(8), Standing::Gap);
+        assert_eq!(s.standing(6), Standing::Stale);
     }
 
     #[test]

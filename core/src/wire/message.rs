@@ -203,12 +203,17 @@ impl<'de> Deserialize<'de> for Levels {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Message<'a> {
-    /// 0, either direction: the sender's protocol and firmware version.
+    /// 0, either direction: the sender's protocol and firmware version,
+    /// and where the sequence numbers start.
     Hello {
         /// The sender's [`PROTOCOL_VERSION`](super::PROTOCOL_VERSION).
         protocol: u8,
         /// Major, minor, patch.
         firmware: [u8; 3],
+        /// Host to MCU: the `seq` its first command will carry, so that the
+        /// loss of any command, the first included, shows as a gap. MCU to
+        /// host: the `seq` it expects next.
+        seq: u16,
     },
     /// 1, MCU to host: what the MCU can take.
     Capabilities {

@@ -59,7 +59,7 @@ pub const MAX_FRAME_LEN: usize = max_frame_len(1 + 3 + 3 + 5 + 2 + MAX_CHUNK);
 pub type ProtocolDecoder = FrameDecoder<{ MAX_FRAME_LEN - 1 }>;
 
 /// The protocol version, the first byte of every frame (before COBS).
-pub const PROTOCOL_VERSION: u8 = 1;
+pub const PROTOCOL_VERSION: u8 = 2;
 
 /// Why a frame could not be encoded or decoded.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

@@ -364,7 +364,7 @@ fn inject(args: &[String]) -> Result<bool, String> {
     // Hello until the board answers (it drops what comes before its USART
     // is enabled).
     let mut hello = vec![0u8];
-    hello.extend(frame(&Message::Hello { protocol: PROTOCOL_VERSION, firmware: [0, 0, 0] })?);
+    hello.extend(frame(&Message::Hello { protocol: PROTOCOL_VERSION, firmware: [0, 0, 0], seq: 100 })?);
     let mut capacity = None;
     for _ in 0..10 {
         s.write_all(&hello).map_err(|e| e.to_string())?;
