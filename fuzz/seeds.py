@@ -12,7 +12,7 @@ import os
 import struct
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-VERSION = 1
+VERSION = 2
 
 
 def varint(n):
@@ -58,8 +58,8 @@ def frame(payload, version=VERSION, crc_xor=0):
 
 
 # Postcard payloads of each message kind (variant index first).
-def hello(protocol, fw):
-    return varint(0) + bytes([protocol]) + bytes(fw)
+def hello(protocol, fw, seq=0):
+    return varint(0) + bytes([protocol]) + bytes(fw) + varint(seq)
 
 
 def capabilities(protocol, max_slice_samples, sample_types, display_points):
@@ -105,19 +105,19 @@ def status(seq, state, slices, points, refresh):
 
 # (name, payload, golden frame from core/tests/wire.rs)
 GOLDEN = [
-    ("hello", hello(1, [0, 3, 2]), "020102010703028c27010700"),
-    ("capabilities", capabilities(1, 65536, 0x0F, 4000), "0e0101018080040fa01ffbcec89300"),
+    ("hello", hello(1, [0, 3, 2], 300), "02020201090302ac02f8e2d61100"),
+    ("capabilities", capabilities(1, 65536, 0x0F, 4000), "0e0201018080040fa01f3ef245aa00"),
     ("begin_volume", begin_volume(1, [64, 64, 300], 2, [1.0, 1.0, 2.5], [100.0, 1000.0], 0b101, 4),
-     "090102014040ac02020103803f0103803f01042040020103c84201097a440504b549c18100"),
-    ("slice_data", slice_data(2, 17, 300, [0, 1, 2, 0xFF, 0]), "0801030211ac0205040102ff052e5670d400"),
-    ("end_volume", end_volume(130), "0901048201fada43e000"),
-    ("set_levels", set_levels(3, [0.5]), "05010503010101063f738622f600"),
+     "090202014040ac02020103803f0103803f01042040020103c84201097a440504c670e99200"),
+    ("slice_data", slice_data(2, 17, 300, [0, 1, 2, 0xFF, 0]), "0802030211ac0205040102ff05de84eea300"),
+    ("end_volume", end_volume(130), "09020482011475f6f200"),
+    ("set_levels", set_levels(3, [0.5]), "05020503010101063f9081ad7800"),
     ("set_view", set_view(4, 30.0, -15.0, 0.0, 0.0, 10.0),
-     "040106040103f041010370c10101010101010101010720410dc7798a00"),
-    ("set_beam", set_beam(5, 64, 2, 20), "0b0107054002141b6516a700"),
-    ("ack", ack(7), "080108078eac3ea800"),
-    ("nack", nack(8, 6), "0901090806cbac93b700"),
-    ("status", status(9, 2, 300, 4000, 5000), "0f010a0902ac02a01f8827415be90900"),
+     "040206040103f041010370c101010101010101010107204130fe9cfc00"),
+    ("set_beam", set_beam(5, 64, 2, 20), "0b020705400214b517822100"),
+    ("ack", ack(7), "08020807d71278aa00"),
+    ("nack", nack(8, 6), "0902090806250326a500"),
+    ("status", status(9, 2, 300, 4000, 5000), "0f020a0902ac02a01f882742e0dee200"),
 ]
 
 for name, payload, want in GOLDEN:
@@ -135,7 +135,7 @@ def pattern(n, start=1):
 
 # Single frames that must be rejected (delimiter included).
 BAD = {
-    "bad_version": frame(ack(7), version=2),
+    "bad_version": frame(ack(7), version=1),
     "bad_crc": frame(ack(7), crc_xor=1),
     "nine_levels": frame(set_levels(3, [1.0] * 9)),
     "unknown_variant": frame(varint(11) + varint(3)),
@@ -202,7 +202,7 @@ write("message_roundtrip", "variant_slice_data_1024",
 # (fuzz_targets/engine.rs).
 def volume_stream(seq, dims, chunk=1024, every=1, skip=None, dup=None):
     nx, ny, nz = dims
-    out = b"\x00" + frame(hello(1, [0, 0, 0]))
+    out = b"\x00" + frame(hello(2, [0, 0, 0], seq))
     out += frame(begin_volume(seq, dims, 0, [1.0, 1.0, 1.0], [40.5, 90.0], 0b111, every))
     seq += 1
     for z in range(nz):
@@ -223,7 +223,7 @@ ENGINE = {
     "volume_missing_chunk": (0x10, volume_stream(5, (8, 6, 3), chunk=16, skip=(1, 16))),
     "volume_retransmitted_chunk": (0x10, volume_stream(5, (8, 6, 3), chunk=16, dup=(1, 0))),
     "volume_times_out": (0x7F, volume_stream(1, (6, 5, 3), chunk=10)),
-    "settings_then_volume": (0x20, b"\x00" + frame(hello(1, [0, 0, 0])) + frame(set_levels(1, [70.0]))
+    "settings_then_volume": (0x20, b"\x00" + frame(hello(2, [0, 0, 0], 1)) + frame(set_levels(1, [70.0]))
                              + frame(set_view(2, 45.0, 10.0, 5.0, 40.0, 30.0)) + frame(set_beam(3, 8, 3, 4))
                              + volume_stream(4, (6, 6, 3))),
     "garbage_then_volume": (0x05, bytes(range(1, 200)) + b"\x00" + volume_stream(9, (5, 5, 2))),

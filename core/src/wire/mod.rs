@@ -27,7 +27,7 @@
 //!
 //! let mut out = [0xAAu8; 64];
 //! let frame = encode(&Message::Ack { seq: 7 }, &mut out).unwrap();
-//! assert_eq!(frame, [0x08, 0x01, 0x08, 0x07, 0x8E, 0xAC, 0x3E, 0xA8, 0x00]);
+//! assert_eq!(frame, [0x08, 0x02, 0x08, 0x07, 0xD7, 0x12, 0x78, 0xAA, 0x00]);
 //!
 //! // The message borrows the decoder's buffer: use it before the next byte.
 //! let mut decoder = FrameDecoder::<64>::new();
