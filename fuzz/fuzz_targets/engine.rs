@@ -27,7 +27,7 @@ fn clean_volume() -> Vec<u8> {
         let mut buf = [0u8; 1100];
         out.extend_from_slice(encode(m, &mut buf).expect("encodes"));
     };
-    push(&Message::Hello { protocol: PROTOCOL_VERSION, firmware: [0, 0, 0], seq: 0 });
+    push(&Message::Hello { protocol: PROTOCOL_VERSION, firmware: [0, 0, 0], seq: 9 });
     let (nx, ny, nz) = (6u16, 5u16, 4u16);
     push(&Message::BeginVolume {
         seq: 9,
