@@ -541,12 +541,12 @@ fn truncated_frame_garbage_and_wrong_version() {
         e.feed(b"\x13\x37garbage\xFF\xFE", 1);
         e.feed(&[0], 1);
         let mut v2 = Vec::new();
-        // Version 2 with a good CRC: decoded, refused.
+        // Another version (3) with a good CRC: decoded, refused.
         let msg = frame(&Message::EndVolume { seq: 1 });
         let mut raw = msg[..msg.len() - 1].to_vec();
         let n = isoscope_core::wire::cobs_decode_in_place(&mut raw).unwrap();
         raw.truncate(n);
-        raw[0] = 2;
+        raw[0] = isoscope_core::wire::PROTOCOL_VERSION + 1;
         let body = raw.len() - 4;
         let crc = isoscope_core::wire::crc32(&raw[..body]);
         raw[body..].copy_from_slice(&crc.to_le_bytes());
