@@ -80,17 +80,18 @@ struct SendArgs {
     /// `device --pty` printed, or tcp:HOST:PORT (`device --tcp`, QEMU).
     #[arg(long)]
     port: String,
-    /// Line rate in bit/s (8N1).
-    #[arg(long, default_value_t = 921_600)]
+    /// Line rate in bit/s (8N1), 300 to 12,000,000.
+    #[arg(long, default_value_t = 921_600, value_parser = in_range::<300, 12_000_000, u32>)]
     baud: u32,
     /// Contour every N-th slice of each plane (the board does; 1 = all).
     #[arg(long, value_name = "N", default_value_t = 1)]
     every: u8,
-    /// Frames in flight before waiting for acknowledgements.
-    #[arg(long, default_value_t = 8)]
+    /// Frames in flight before waiting for acknowledgements, 1 to 32 (the
+    /// board remembers the answers to its last 32).
+    #[arg(long, default_value_t = 8, value_parser = in_range::<1, 32, usize>)]
     window: usize,
-    /// Data bytes per chunk (at most 1024).
-    #[arg(long, default_value_t = isoscope_core::wire::MAX_CHUNK)]
+    /// Data bytes per chunk, 1 to 1024.
+    #[arg(long, default_value_t = isoscope_core::wire::MAX_CHUNK, value_parser = in_range::<1, 1024, usize>)]
     chunk: usize,
     /// Set the view first: yaw in degrees (the other angles default to the
     /// default view's).
@@ -125,21 +126,21 @@ struct DeviceArgs {
     #[arg(long, value_name = "ADDR")]
     tcp: Option<String>,
     /// The UART's line rate (bit/s, 8N1): bytes are taken no faster; 0 takes
-    /// them as fast as they come.
-    #[arg(long, default_value_t = 921_600)]
+    /// them as fast as they come; at most 12,000,000.
+    #[arg(long, default_value_t = 921_600, value_parser = in_range::<0, 12_000_000, u32>)]
     baud: u32,
     /// Rewrite this PNG whenever the picture changes.
     #[arg(long, value_name = "FILE.png")]
     snapshot: Option<PathBuf>,
-    /// Snapshot width and height in pixels.
-    #[arg(long, default_value_t = 512)]
+    /// Snapshot width and height in pixels, 16 to 8192.
+    #[arg(long, default_value_t = 512, value_parser = in_range::<16, 8192, u32>)]
     size: u32,
     /// Write one frame's DAC samples (`x y beam` lines) to this file
     /// whenever a new volume is shown.
     #[arg(long, value_name = "FILE")]
     samples: Option<PathBuf>,
-    /// Exit after this many volumes are shown.
-    #[arg(long, value_name = "N")]
+    /// Exit after this many volumes are shown (at least 1).
+    #[arg(long, value_name = "N", value_parser = in_range::<1, 4_294_967_295, u32>)]
     exit_after: Option<u32>,
     /// With --tcp: drop a client that sends no whole frame for this many
     /// seconds (so an idle or trickling one cannot keep others out).
@@ -149,12 +150,13 @@ struct DeviceArgs {
     /// firmware's STM32F407). Without it, the sizes below.
     #[arg(long, value_name = "NAME", value_parser = parse_board, conflicts_with_all = ["max_slice_bytes", "points"])]
     board: Option<Board>,
-    /// Largest slice the board takes, in bytes (nx * ny * sample size).
-    #[arg(long, default_value_t = 1 << 20)]
+    /// Largest slice the board takes, in bytes (nx * ny * sample size), 64
+    /// to 2^30.
+    #[arg(long, default_value_t = 1 << 20, value_parser = in_range::<64, 1_073_741_824, usize>)]
     max_slice_bytes: usize,
     /// Points each of the engine's two surfaces holds (it also gets the
-    /// scratch to stitch and order them, 8 bytes a point).
-    #[arg(long, default_value_t = 1 << 19)]
+    /// scratch to stitch and order them, 8 bytes a point), 16 to 2^26.
+    #[arg(long, default_value_t = 1 << 19, value_parser = in_range::<16, 67_108_864, usize>)]
     points: usize,
 }
 
@@ -162,8 +164,8 @@ struct DeviceArgs {
 struct InfoArgs {
     #[command(flatten)]
     source: Source,
-    /// Histogram bins.
-    #[arg(long, default_value_t = 32)]
+    /// Histogram bins, 1 to 4096.
+    #[arg(long, default_value_t = 32, value_parser = in_range::<1, 4096, usize>)]
     bins: usize,
 }
 
@@ -181,8 +183,9 @@ struct RenderArgs {
     /// 0.05 shows them faintly (a scope without one).
     #[arg(long, default_value_t = 0.0)]
     show_blanked: f32,
-    /// Refresh the frame this many times on the phosphor (persistence).
-    #[arg(long, default_value_t = 1)]
+    /// Refresh the frame this many times on the phosphor (persistence), 1
+    /// to 10,000.
+    #[arg(long, default_value_t = 1, value_parser = in_range::<1, 10_000, u32>)]
     frames: u32,
     /// Also write an animation of the surface slowly turning (yaw) to this
     /// file: .gif, or .png for an animated PNG. (The still picture is not
@@ -390,6 +393,16 @@ fn print_out(text: &str) -> Result<()> {
         Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
         r => r.context("cannot write to standard output"),
     }
+}
+
+/// A whole number in `MIN ..= MAX`, for size and count options: checked
+/// where the option is parsed, before anything is allocated.
+fn in_range<const MIN: u64, const MAX: u64, T: TryFrom<u64>>(s: &str) -> Result<T, String> {
+    let v: u64 = s.trim().parse().map_err(|_| format!("`{s}` is not a whole number"))?;
+    if !(MIN..=MAX).contains(&v) {
+        return Err(format!("`{s}` is out of range: give {MIN} to {MAX}"));
+    }
+    T::try_from(v).map_err(|_| format!("`{s}` is too large for this machine"))
 }
 
 /// A timeout in seconds: finite, 0.1 to one day.

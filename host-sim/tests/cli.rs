@@ -838,3 +838,29 @@ fn options_that_cannot_apply_are_refused_plainly() {
     let err = text(&out.stderr);
     assert!(err.contains("the slice stride must be at least 1") && !err.contains("cannot take"), "{err}");
 }
+
+/// Size and count options are checked where they are parsed, against a
+/// documented range, before anything is allocated or run (issue 16: these
+/// panicked on overflow, aborted on allocation or ran unbounded).
+#[test]
+fn size_and_count_options_have_ranges() {
+    for args in [
+        &["device", "--tcp", "127.0.0.1:0", "--max-slice-bytes", "18446744073709551615"][..],
+        &["device", "--tcp", "127.0.0.1:0", "--max-slice-bytes", "100000000000"],
+        &["device", "--tcp", "127.0.0.1:0", "--points", "4294967295"],
+        &["device", "--tcp", "127.0.0.1:0", "--points", "0"],
+        &["device", "--pty", "--size", "0"],
+        &["device", "--pty", "--exit-after", "0"],
+        &["info", "--demo", "hydrogen:8", "--bins", "1000000000"],
+        &["info", "--demo", "hydrogen:8", "--bins", "0"],
+        &["render", "--demo", "hydrogen:8", "--frames", "4294967295"],
+        &["send", "--demo", "hydrogen:8", "--port", "tcp:127.0.0.1:1", "--window", "0"],
+        &["send", "--demo", "hydrogen:8", "--port", "tcp:127.0.0.1:1", "--baud", "0"],
+    ] {
+        let out = run(args);
+        let err = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains("out of range: give"), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+    }
+}
