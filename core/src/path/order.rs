@@ -184,6 +184,13 @@ impl Tour {
         (x.point(entry), x.point(exit))
     }
 
+    /// Measure every jump, kept with the steps.
+    pub(super) fn measure_all(&self, x: &mut Index<'_, '_>) {
+        for k in 0..self.len.saturating_sub(1) {
+            self.measure(x, k);
+        }
+    }
+
     /// Measure the jump from step `k` to step `k + 1`.
     pub(super) fn measure(&self, x: &mut Index<'_, '_>, k: usize) {
         let jump = self.metric.d(self.ends(x, k).1, self.ends(x, k + 1).0);
@@ -203,9 +210,7 @@ impl Tour {
             // again).
             let mut budget = SEARCH_BUDGET;
             if self.nearest_on_screen(x, &near, &mut budget) {
-                for k in 0..self.len - 1 {
-                    self.measure(x, k);
-                }
+                self.measure_all(x);
                 match Near::build(x, self) {
                     Some(n) => near = n,
                     None => return self.best_entries(x, start),
@@ -433,9 +438,7 @@ impl Tour {
         if n < 3 {
             return false;
         }
-        for k in 0..n - 1 {
-            self.measure(x, k);
-        }
+        self.measure_all(x);
         let m = self.metric;
         let mut any = false;
         for i in 0..n - 1 {
@@ -578,9 +581,7 @@ impl Tour {
         if n < 3 {
             return false;
         }
-        for k in 0..n - 1 {
-            self.measure(x, k);
-        }
+        self.measure_all(x);
         let m = self.metric;
         let mut improved = true;
         let mut any = false;

@@ -200,9 +200,7 @@ proptest::proptest! {
                 }
                 let mut budget = 8 * WINDOW as u64 * tour.len as u64;
                 if afresh {
-                    for k in 0..tour.len.saturating_sub(1) {
-                        tour.measure(&mut x, k);
-                    }
+                    tour.measure_all(&mut x);
                     two_opt_afresh(&tour, &mut x, WINDOW, &mut budget)
                 } else {
                     tour.two_opt(&mut x, WINDOW, &mut budget);
@@ -452,9 +450,7 @@ proptest::proptest! {
                 let end = x.span(f).0;
                 tour.push(&mut x, f, end);
             }
-            for k in 0..tour.len - 1 {
-                tour.measure(&mut x, k);
-            }
+            tour.measure_all(&mut x);
             if matches!(metric, Metric::Screen { .. }) {
                 proptest::prop_assert!(Near::build(&mut x, &tour).is_some(), "no neighbours");
             }
