@@ -381,16 +381,7 @@ proptest::proptest! {
         let mut p = store(256);
         let mut src = Geometry::new(&mut p);
         src.reset(0);
-        for (pts, kind) in &frags {
-            let first = match (pts.len(), kind) {
-                (1, _) => Kind::Dot,
-                (2, _) | (_, 0) => Kind::Move,
-                _ => Kind::Loop,
-            };
-            for (n, &q) in pts.iter().enumerate() {
-                src.push_raw(q, if n == 0 { first } else { Kind::Line });
-            }
-        }
+        push_fragments(&mut src, &frags);
         let mut p2 = store(512);
         let mut dst = Geometry::new(&mut p2);
         let mut scratch = vec![0u8; if tight { 20 * src.len() + 32 } else { 64 * 1024 }];
@@ -398,6 +389,21 @@ proptest::proptest! {
             let st = chain(Source::one(&src), &mut dst, &mut scratch, [0; 3], 0.0, Pass::Order(metric));
             proptest::prop_assert!(st.ordered);
             proptest::prop_assert_eq!(drawn(&dst), drawn(&src));
+        }
+    }
+}
+
+/// Push `frags` (points and a kind selector) as fragments: one point is a
+/// dot, two points or selector 0 an open polyline, the rest a loop.
+fn push_fragments(g: &mut Geometry<'_>, frags: &[(Vec<Packed>, u8)]) {
+    for (pts, kind) in frags {
+        let first = match (pts.len(), kind) {
+            (1, _) => Kind::Dot,
+            (2, _) | (_, 0) => Kind::Move,
+            _ => Kind::Loop,
+        };
+        for (n, &q) in pts.iter().enumerate() {
+            g.push_raw(q, if n == 0 { first } else { Kind::Line });
         }
     }
 }
@@ -431,16 +437,7 @@ proptest::proptest! {
         let mut p = store(512);
         let mut src = Geometry::new(&mut p);
         src.reset(0);
-        for (pts, kind) in &frags {
-            let first = match (pts.len(), kind) {
-                (1, _) => Kind::Dot,
-                (2, _) | (_, 0) => Kind::Move,
-                _ => Kind::Loop,
-            };
-            for (n, &q) in pts.iter().enumerate() {
-                src.push_raw(q, if n == 0 { first } else { Kind::Line });
-            }
-        }
+        push_fragments(&mut src, &frags);
         for metric in metrics() {
             let mut scratch = vec![0u8; 64 * 1024];
             let mut x = Index::build(Source::one(&src), &mut scratch, true, false).expect("room");
