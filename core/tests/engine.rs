@@ -10,6 +10,7 @@ use isoscope_core::demo::Demo;
 use isoscope_core::engine::{
     AbortReason, Buffers, Engine, EngineConfig, Event, Geometry, Packed, StaticBuffers,
 };
+use isoscope_core::path::Stride;
 use isoscope_core::wire::{
     AXIS_X, AXIS_Y, AXIS_Z, DeviceState, FrameDecoder, Levels, MAX_CHUNK, Message, NackCode,
     PROTOCOL_VERSION, SampleType, encode,
@@ -265,6 +266,21 @@ impl SurfaceSink for Keep {
 
 /// The segments of the whole-volume contouring, in the engine's fixed point.
 fn batch(v: &Vol) -> Vec<Seg> {
+    batch_at(v, Stride::new(v.dims, v.every))
+}
+
+/// `v`'s slices `every` apart, as a board thins them ([`Stride`]).
+fn stride_at(v: &Vol, every: u16) -> Stride {
+    let mut s = Stride::new(v.dims, v.every);
+    while s.every < every {
+        s = s.coarser().expect("a stride the volume has");
+    }
+    assert_eq!(s.every, every);
+    s
+}
+
+/// The segments of contouring the slices `stride` keeps.
+fn batch_at(v: &Vol, stride: Stride) -> Vec<Seg> {
     let [nx, ny, nz] = v.dims.map(usize::from);
     let vol = Volume::new(&v.values, nx, ny, nz).unwrap();
     let mut planes = Planes::NONE;
@@ -278,11 +294,16 @@ fn batch(v: &Vol) -> Vec<Seg> {
         }
     }
     let mut keep = Keep(Vec::new());
-    if v.every <= 1 {
+    if stride.every <= 1 {
         contour_volume(&vol, planes, &v.levels, Traversal::Corrected, &mut keep).unwrap();
     } else {
         for plane in planes.iter() {
-            for index in (0..vol.slice_count(plane)).step_by(usize::from(v.every)) {
+            let axis = match plane {
+                isoscope_core::contour::grid::Plane::XY => 2,
+                isoscope_core::contour::grid::Plane::XZ => 1,
+                isoscope_core::contour::grid::Plane::YZ => 0,
+            };
+            for index in (0..vol.slice_count(plane)).filter(|&i| stride.keeps(axis, i as u16)) {
                 contour_slice(&vol, SliceId { plane, index }, &v.levels, Traversal::Corrected, &mut keep)
                     .unwrap();
             }
@@ -825,43 +846,123 @@ fn levels_and_beam_settings() {
     assert_eq!(nacks(&answers(&mut e)), [NackCode::Invalid, NackCode::Invalid]);
 }
 
+/// From a commit: the stride asked, the stride kept, commands dropped.
+type AtCommit = Option<(u8, u16, u32)>;
+/// From a stitch: the stride drawn, points cut.
+type AtStitch = Option<(u16, u32)>;
+
+/// The stride a volume was committed and drawn at, from the events.
+fn strides(ev: &[Event]) -> (AtCommit, AtStitch) {
+    let committed = ev.iter().find_map(|x| match *x {
+        Event::Committed { asked, every, dropped, .. } => Some((asked, every, dropped)),
+        _ => None,
+    });
+    let stitched = ev.iter().find_map(|x| match *x {
+        Event::Stitched { every, cut, .. } => Some((every, cut)),
+        _ => None,
+    });
+    (committed, stitched)
+}
+
 #[test]
-fn a_surface_larger_than_memory_is_cut_and_counted() {
+fn a_surface_larger_than_memory_is_thinned_to_whole_slices_not_cut() {
+    // A back of a third of the pieces and no room to spill: the stream
+    // doubles the stride until the surface fits, and the picture is
+    // exactly the surface contoured at that stride (whole slices of each
+    // plane), not a part of the finer one.
+    for (demo, n, ty, every) in [
+        (Demo::Gyroid, 16, SampleType::U8, 1),
+        (Demo::Hydrogen, 18, SampleType::F32, 1),
+        (Demo::Torus, 20, SampleType::I16, 3),
+    ] {
+        let v = Vol { every, ..Vol::demo(demo, n, ty) };
+        let mut mem = big();
+        let mut whole = engine(&mut mem);
+        whole.feed(&Host::new().volume(&v), 0);
+        whole.update(0);
+        let pieces = whole.chain_stats().points_in as usize;
+        let mut mem = Mem::sized(2 * v.slice_bytes(), n, [pieces; 2].map(|p| p / 3), 8 * pieces);
+        let mut e = engine(&mut mem);
+        e.feed(&Host::new().volume(&v), 0);
+        let (committed, _) = strides(&events(&mut e));
+        let Some((asked, thinned, 0)) = committed else { panic!("{demo:?}: {committed:?}") };
+        assert_eq!(asked, every);
+        assert!(thinned >= 2 * u16::from(every), "{demo:?}: every {thinned}");
+        e.update(0);
+        let (_, stitched) = strides(&events(&mut e));
+        assert_eq!(stitched, Some((thinned, 0)), "{demo:?}");
+        assert_eq!(
+            shown(&e),
+            batch_at(&v, stride_at(&v, thinned)),
+            "{demo:?}: the picture at every {thinned}"
+        );
+    }
+}
+
+#[test]
+fn a_surface_larger_than_memory_at_the_coarsest_stride_is_cut_and_counted() {
+    // 500 points hold no stride of this gyroid: at the coarsest (every
+    // 8th of 16: slices 0 and 8 of each plane) it is cut, and said to be.
     let v = Vol::demo(Demo::Gyroid, 16, SampleType::U8);
     let mut mem = Mem::new(16 * 16, 16, 500);
     let mut e = engine(&mut mem);
     e.feed(&Host::new().volume(&v), 0);
     let ev = events(&mut e);
-    let Some(Event::Committed { commands, dropped, .. }) =
+    let Some(Event::Committed { commands, dropped, every, .. }) =
         ev.iter().find(|x| matches!(x, Event::Committed { .. })).copied()
     else {
         panic!("{ev:?}")
     };
+    assert_eq!(every, 8);
     assert!(commands <= 500 && commands > 450, "{commands}");
-    assert!(dropped > 1000, "{dropped}");
+    assert!(dropped > 100, "{dropped}");
     e.update(0);
     assert!(e.commands().next().is_some());
 }
 
 #[test]
-fn a_picture_larger_than_the_front_is_cut_and_said_to_be() {
-    // Every piece fits the back; stitched and merged they still do not fit
-    // a front of 200 points.
+fn a_picture_larger_than_the_front_is_thinned_at_the_commit() {
+    // Every piece fits the back; stitched they do not fit a front of a
+    // third of them: the commit thins the pieces and stitches again.
     let v = Vol { levels: vec![0.1], ..Vol::demo(Demo::Hydrogen, 16, SampleType::F32) };
-    let mut mem = Mem::sized(2 * 16 * 16 * 4, 16, [200, 8000], 8 * 8000);
+    let mut mem = big();
+    let mut whole = engine(&mut mem);
+    whole.feed(&Host::new().volume(&v), 0);
+    whole.update(0);
+    let points = whole.chain_stats().points_out as usize;
+    let mut mem = Mem::sized(2 * 16 * 16 * 4, 16, [points / 3, 8000], 8 * 8000);
+    let mut e = engine(&mut mem);
+    e.feed(&Host::new().volume(&v), 0);
+    let (committed, _) = strides(&events(&mut e));
+    assert_eq!(committed, Some((1, 1, 0)));
+    e.update(0);
+    let (_, stitched) = strides(&events(&mut e));
+    let Some((thinned, 0)) = stitched else { panic!("{stitched:?}") };
+    assert!(thinned >= 2, "{thinned}");
+    assert_eq!(shown(&e), batch_at(&v, stride_at(&v, thinned)));
+    assert!(e.chain_stats().ordered);
+}
+
+#[test]
+fn a_picture_larger_than_the_front_at_the_coarsest_stride_is_cut_and_said_to_be() {
+    // Every piece fits the back; stitched and merged, not even slices 0
+    // and 8 of each plane fit a front of 100 points.
+    let v = Vol { levels: vec![0.1], ..Vol::demo(Demo::Hydrogen, 16, SampleType::F32) };
+    let mut mem = Mem::sized(2 * 16 * 16 * 4, 16, [100, 8000], 8 * 8000);
     let mut e = engine(&mut mem);
     e.feed(&Host::new().volume(&v), 0);
     let ev = events(&mut e);
     assert!(ev.iter().any(|x| matches!(x, Event::Committed { dropped: 0, .. })), "{ev:?}");
     e.update(0);
     let ev = events(&mut e);
-    let Some(Event::Stitched { points, cut, ordered, .. }) =
+    let Some(Event::Stitched { points, cut, ordered, every, .. }) =
         ev.iter().find(|x| matches!(x, Event::Stitched { .. })).copied()
     else {
         panic!("{ev:?}")
     };
     assert!(ordered, "{ev:?}");
-    assert!(points <= 200 && cut > 500, "{ev:?}");
+    assert_eq!(every, 8);
+    assert!(points <= 100 && cut > 50, "{ev:?}");
     assert_eq!(e.chain_stats().cut, cut);
 }
 
@@ -896,11 +997,19 @@ fn shows_hydrogen32_whole(buffers: Buffers<'_>) {
     let mut e = Engine::new(EngineConfig::default(), buffers).unwrap();
     e.feed(&Host::new().volume(&v), 0);
     let ev = events(&mut e);
-    let committed = Event::Committed { dims: [32; 3], commands: 12816, dropped: 0, nonfinite_cells: 0 };
+    let committed = Event::Committed {
+        dims: [32; 3],
+        commands: 12816,
+        dropped: 0,
+        nonfinite_cells: 0,
+        asked: 1,
+        every: 1,
+    };
     assert!(ev.contains(&committed), "{ev:?}");
     e.update(0);
     let (st, all) = (e.chain_stats(), whole.chain_stats());
-    let stitched = Event::Stitched { fragments: st.fragments, points: st.points_out, cut: 0, ordered: true };
+    let stitched =
+        Event::Stitched { fragments: st.fragments, points: st.points_out, cut: 0, ordered: true, every: 1 };
     assert!(events(&mut e).contains(&stitched), "{st:?}");
     assert_eq!(st.points_in, 12816);
     assert!(st.ordered);
@@ -960,8 +1069,14 @@ fn a_spilled_surface_draws_exactly_the_segments_of_whole_volume_contouring() {
         let mut e = engine(&mut spilled);
         e.feed(&Host::new().volume(&v), 0);
         let ev = events(&mut e);
-        let committed =
-            Event::Committed { dims: v.dims, commands: pieces as u32, dropped: 0, nonfinite_cells: 0 };
+        let committed = Event::Committed {
+            dims: v.dims,
+            commands: pieces as u32,
+            dropped: 0,
+            nonfinite_cells: 0,
+            asked: 1,
+            every: 1,
+        };
         assert!(ev.contains(&committed), "{demo:?} {ev:?}");
         e.update(0);
         assert!(e.chain_stats().ordered, "{demo:?}");

@@ -61,15 +61,26 @@ pub struct Loaded {
     pub cut: u32,
     /// False when there was too little scratch to stitch and order.
     pub ordered: bool,
+    /// The slice stride the volume asked for.
+    pub asked: u16,
+    /// The slice stride drawn: coarser than asked when the surface did not
+    /// fit (every other slice of each plane dropped, each time).
+    pub every: u16,
     /// Seconds: the transfer (decoding and contouring, slice by slice), and
     /// the commit (stitch, order, count a frame).
     pub seconds: [f64; 2],
 }
 
 impl Loaded {
-    /// Whether the whole surface is drawn, stitched and ordered.
+    /// Whether the whole surface is drawn, at the stride asked, stitched
+    /// and ordered.
     pub fn whole(&self) -> bool {
-        self.dropped == 0 && self.cut == 0 && self.ordered
+        self.dropped == 0 && self.cut == 0 && self.ordered && !self.thinned()
+    }
+
+    /// Whether the surface was drawn at a coarser stride than asked.
+    pub fn thinned(&self) -> bool {
+        self.every > self.asked
     }
 }
 
@@ -134,11 +145,13 @@ impl<'a> InProcess<'a> {
         let mut refused = None;
         while let Some(ev) = self.engine.next_event() {
             match ev {
-                Event::Committed { commands, dropped, nonfinite_cells, .. } => {
-                    self.loaded = Loaded { commands, dropped, nonfinite_cells, ..Loaded::default() };
+                Event::Committed { commands, dropped, nonfinite_cells, asked, every, .. } => {
+                    let asked = u16::from(asked.max(1));
+                    self.loaded =
+                        Loaded { commands, dropped, nonfinite_cells, asked, every, ..Loaded::default() };
                 }
-                Event::Stitched { points, cut, ordered, .. } => {
-                    self.loaded = Loaded { points, cut, ordered, ..self.loaded };
+                Event::Stitched { points, cut, ordered, every, .. } => {
+                    self.loaded = Loaded { points, cut, ordered, every, ..self.loaded };
                 }
                 Event::Nacked { code, .. } => {
                     refused.get_or_insert(code);

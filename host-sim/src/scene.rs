@@ -272,6 +272,13 @@ impl Scene {
                 None => "the host's memory".into(),
             };
             let mut what = Vec::new();
+            if l.thinned() {
+                what.push(format!(
+                    "it draws {} of each plane (counted from the middle), not {}",
+                    stride(l.every),
+                    stride(l.asked),
+                ));
+            }
             if l.dropped > 0 {
                 let pieces = u64::from(l.commands) + u64::from(l.dropped);
                 what.push(format!("{} of the surface's {pieces} pieces were dropped", l.dropped));
@@ -282,11 +289,12 @@ impl Scene {
             if !l.ordered {
                 what.push("there was no room to stitch and order it (drawn as contoured)".into());
             }
-            out.push(format!(
-                "note: {holder} holds less than this surface: {}; draw fewer slices (--every), \
-                 fewer planes (--axes) or fewer levels for the whole of it",
-                what.join(", ")
-            ));
+            let advice = if l.dropped > 0 || l.cut > 0 || !l.ordered {
+                "draw fewer slices (--every), fewer planes (--axes) or fewer levels for the whole of it"
+            } else {
+                "draw fewer planes (--axes) or fewer levels for more of its slices"
+            };
+            out.push(format!("note: {holder} holds less than this surface: {}; {advice}", what.join(", ")));
         }
         if self.frame.lit_samples == 0 {
             out.push("warning: nothing is drawn (no contour at these levels on these slices)".into());
@@ -308,6 +316,7 @@ impl Scene {
         kv("board", self.board.map_or("host".into(), |b| b.name.to_string()));
         kv("capacity_points", self.capacity.points.to_string());
         kv("fragments", c.fragments.to_string());
+        kv("every", self.loaded.every.to_string());
         kv("pieces_dropped", self.loaded.dropped.to_string());
         kv("points_cut", self.loaded.cut.to_string());
         kv("polylines", self.polylines.to_string());
@@ -327,6 +336,18 @@ impl Scene {
         kv("pipeline_ms", format!("{:.3}", self.seconds.iter().sum::<f64>() * 1e3));
         s
     }
+}
+
+/// "every slice", "every 2nd slice", "every 16th slice".
+pub fn stride(every: u16) -> String {
+    let suffix = match (every % 10, every % 100) {
+        (_, 11..=13) => "th",
+        (1, _) => "st",
+        (2, _) => "nd",
+        (3, _) => "rd",
+        _ => "th",
+    };
+    if every <= 1 { "every slice".into() } else { format!("every {every}{suffix} slice") }
 }
 
 /// Write `samples` as text, `x y beam` a line (beam 1 lit, 0 blanked): the

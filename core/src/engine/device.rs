@@ -7,7 +7,7 @@ use super::stream::{Stream, VolumeSpec};
 use super::{AbortReason, Counters, EVENT_QUEUE, EngineConfig, Event, TX_QUEUE};
 use crate::beam::{BeamConfig, FrameStats};
 use crate::command::Point3;
-use crate::path::Geometry;
+use crate::path::{Geometry, Stride};
 use crate::view::{Bounds, Projection, View, ViewTransform};
 use crate::wire::{DeviceState, Levels, Message, NackCode, PROTOCOL_VERSION, encode};
 use heapless::Deque;
@@ -18,6 +18,9 @@ pub(super) struct Shown {
     pub(super) dims: [u16; 3],
     pub(super) spacing: [f32; 3],
     pub(super) points: u32,
+    /// Its slices: as asked, or fewer when its surface did not fit
+    /// ([`crate::path::thin`]).
+    pub(super) stride: Stride,
     /// The box of the surface's points (voxel coordinates), which every
     /// view fits by its bounding sphere; the volume's box until the
     /// surface is known, or when it is empty.
@@ -230,7 +233,13 @@ impl Device<'_> {
                 let [nx, ny, nz] = t.spec.dims.map(usize::from);
                 let bounds = Bounds::of_volume(nx, ny, nz)
                     .unwrap_or(Bounds::new(Point3::new(0.0, 0.0, 0.0), Point3::new(1.0, 1.0, 1.0)));
-                self.shown = Some(Shown { dims: t.spec.dims, spacing: t.spec.spacing, points: 0, bounds });
+                self.shown = Some(Shown {
+                    dims: t.spec.dims,
+                    spacing: t.spec.spacing,
+                    points: 0,
+                    stride: t.stride,
+                    bounds,
+                });
                 self.commit = true;
                 self.counters.volumes = self.counters.volumes.wrapping_add(1);
                 let spilled = self.stream.spilled();
@@ -239,6 +248,8 @@ impl Device<'_> {
                     commands: (back.len() + spilled.len()) as u32,
                     dropped: back.dropped().saturating_add(spilled.dropped()),
                     nonfinite_cells: t.stats.nonfinite_cells.min(u64::from(u32::MAX)) as u32,
+                    asked: t.spec.every,
+                    every: t.stride.every,
                 });
                 Ok(())
             }

@@ -55,6 +55,11 @@ pub enum Event {
         dropped: u32,
         /// Subgrids skipped for NaN or infinite samples.
         nonfinite_cells: u32,
+        /// The slice stride the volume asked for.
+        asked: u8,
+        /// The stride kept: coarser than asked when the surface did not fit
+        /// the memory (every other slice of each plane went, each time).
+        every: u16,
     },
     /// A completed volume's pieces were stitched and ordered into the
     /// picture.
@@ -68,6 +73,9 @@ pub enum Event {
         /// False when there was too little scratch to stitch and order:
         /// the pieces are drawn as they came, with more blanked travel.
         ordered: bool,
+        /// The slice stride drawn: coarser than when committed when the
+        /// stitched picture did not fit.
+        every: u16,
     },
     /// A transfer ended without a picture; the old one stays.
     Aborted {
@@ -115,13 +123,14 @@ impl core::fmt::Display for Event {
             Self::Begun { dims: [x, y, z], sample_type, levels } => {
                 write!(f, "begun dims={x}x{y}x{z} type={sample_type:?} levels={levels}")
             }
-            Self::Committed { dims: [x, y, z], commands, dropped, nonfinite_cells } => write!(
+            Self::Committed { dims: [x, y, z], commands, dropped, nonfinite_cells, asked, every } => write!(
                 f,
-                "committed dims={x}x{y}x{z} commands={commands} dropped={dropped} nonfinite_cells={nonfinite_cells}"
+                "committed dims={x}x{y}x{z} commands={commands} dropped={dropped} nonfinite_cells={nonfinite_cells} every={every} (asked {asked})"
             ),
-            Self::Stitched { fragments, points, cut, ordered } => {
-                write!(f, "stitched fragments={fragments} points={points} cut={cut} ordered={ordered}")
-            }
+            Self::Stitched { fragments, points, cut, ordered, every } => write!(
+                f,
+                "stitched fragments={fragments} points={points} cut={cut} ordered={ordered} every={every}"
+            ),
             Self::Aborted { reason, slices } => write!(f, "aborted slices={slices} reason={reason}"),
             Self::Nacked { seq, code } => write!(f, "nack seq={seq} code={code:?}"),
             Self::FrameError { error } => write!(f, "bad frame: {error}"),

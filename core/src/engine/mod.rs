@@ -251,44 +251,51 @@ impl<'a> Engine<'a> {
     fn commit(&mut self) {
         let dev = &mut self.dev;
         dev.commit = false;
-        let Some(spec) = dev.shown.as_mut() else { return };
-        let (spill, free) = dev.stream.take_spill();
-        let pieces = Source::two(&self.back, &spill);
-        // Every view fits the surface, not the volume: the box of its
-        // pieces (stitching and merging keep their end points, so it is the
-        // picture's box too).
-        if let Some([lo, hi]) = pieces.extent() {
-            spec.bounds = Bounds::new(self.back.point(lo), self.back.point(hi));
-        }
-        let spec = *spec;
-        // Merge within the tolerance at the largest scale a view can give:
-        // the bounding sphere's fit, times the longest voxel side, doubled.
-        let tolerance = ViewTransform::fit_sphere(
-            &View { spacing: spec.spacing, bits: dev.beam.bits, ..dev.view },
-            spec.bounds,
-        )
-        .map_or(0.0, |t| {
-            let side = spec.spacing.iter().fold(0.0f32, |m, &s| m.max(s));
-            dev.cfg.merge_tolerance / (2.0 * t.scale() * side)
-        });
-        // Stitch the pieces (the back's, then those that spilled into the
-        // slice memory) into maximal polylines (into the front), then order
-        // those for short jumps (back into the back), and make that the
-        // front. Collinear runs are merged once: in the order pass, which
-        // then also joins polylines that touch where one ends and the next
-        // is entered (merging first could take such a vertex away); but in
-        // the stitch pass when the pieces are more than the front holds
-        // (stitching joins them, merging thins them: the surface fits
-        // again).
-        let merge_first = pieces.len() > self.front.capacity();
-        let (first, then) = if merge_first { (tolerance, 0.0) } else { (0.0, tolerance) };
+        let Some(shown) = dev.shown.as_mut() else { return };
+        let (mut spill, free) = dev.stream.take_spill();
         let scratch = if free.len() >= self.scratch.len() { free } else { &mut *self.scratch };
-        let stitched = crate::path::chain(pieces, &mut self.front, scratch, [0; 3], first, Pass::Stitch);
+        let view = View { spacing: shown.spacing, bits: dev.beam.bits, ..dev.view };
+        let stitched = loop {
+            let pieces = Source::two(&self.back, &spill);
+            // Every view fits the surface, not the volume: the box of its
+            // pieces (stitching and merging keep their end points, so it is
+            // the picture's box too).
+            if let Some([lo, hi]) = pieces.extent() {
+                shown.bounds = Bounds::new(self.back.point(lo), self.back.point(hi));
+            }
+            // Merge within the tolerance at the largest scale a view can
+            // give: the bounding sphere's fit, times the longest voxel side,
+            // doubled.
+            let tolerance = ViewTransform::fit_sphere(&view, shown.bounds).map_or(0.0, |t| {
+                let side = shown.spacing.iter().fold(0.0f32, |m, &s| m.max(s));
+                dev.cfg.merge_tolerance / (2.0 * t.scale() * side)
+            });
+            // Stitch the pieces (the back's, then those that spilled into
+            // the slice memory) into maximal polylines (into the front), then
+            // order those for short jumps (back into the back), and make that
+            // the front. Collinear runs are merged once: in the order pass,
+            // which then also joins polylines that touch where one ends and
+            // the next is entered (merging first could take such a vertex
+            // away); but in the stitch pass when the pieces are more than
+            // the front holds (stitching joins them, merging thins them: the
+            // surface fits again).
+            let merge_first = pieces.len() > self.front.capacity();
+            let (first, then) = if merge_first { (tolerance, 0.0) } else { (0.0, tolerance) };
+            let stitched = crate::path::chain(pieces, &mut self.front, scratch, [0; 3], first, Pass::Stitch);
+            // A picture the front cannot hold is thinned as the stream
+            // thins one the memory cannot: every other slice goes, until it
+            // fits or one slice of each plane is left.
+            let coarser = if stitched.cut == 0 { None } else { shown.stride.coarser() };
+            let Some(coarser) = coarser else { break (stitched, then) };
+            shown.stride = coarser;
+            crate::path::thin(&mut self.back, &mut spill, &shown.stride);
+        };
+        let (stitched, then) = stitched;
+        let spec = *shown;
         let slices = dev.stream.idle_scratch().unwrap_or(&mut []);
         let scratch = if slices.len() >= self.scratch.len() { slices } else { &mut *self.scratch };
         // A still view orders for its own screen (a jump across the depth
         // costs it nothing); a spinning one in space, for every angle.
-        let view = View { spacing: spec.spacing, bits: dev.beam.bits, ..dev.view };
         let metric = match ViewTransform::fit_sphere(&view, spec.bounds) {
             Ok(t) if dev.spin_deg_per_s == 0.0 => {
                 let park = dev.beam.park_sample();
@@ -328,6 +335,7 @@ impl<'a> Engine<'a> {
             points: self.chain.points_out,
             cut: self.chain.cut,
             ordered: self.chain.ordered,
+            every: spec.stride.every,
         });
         dev.status_due = true;
     }

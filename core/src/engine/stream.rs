@@ -17,7 +17,7 @@
 use crate::command::{Command, CommandSink, Point3};
 use crate::contour::trace::Traversal;
 use crate::contour::{ContourStats, RowContourer};
-use crate::path::{self, Geometry, Held};
+use crate::path::{self, Geometry, Held, Stride};
 use crate::wire::{AXIS_X, AXIS_Y, AXIS_Z, Levels, NackCode, SampleType};
 use core::convert::Infallible;
 
@@ -79,6 +79,9 @@ pub(crate) struct Transfer {
     pub job: Option<Job>,
     /// Fragments of the surface kept so far.
     pub frags: u32,
+    /// The slices in force: `spec.every` apart, twice as many each time
+    /// the surface outgrew the memory ([`path::thin`]).
+    pub stride: Stride,
 }
 
 /// The planes a [`Job`] contours, in order.
@@ -128,12 +131,18 @@ pub(crate) struct Stream<'a> {
     spill: Option<(usize, Held)>,
 }
 
-/// Keeps every command: in the back while it has room, then in the spill;
-/// the store that refuses one counts it. The spill stops short of its room
-/// by the scratch the stitch pass will want for all the pieces kept
-/// ([`path::stitch_reserve`]), in the slice memory, which the spill then
-/// shares with it: a surface larger than the board holds is cut, but what
-/// is kept is stitched and ordered.
+/// Keeps every command of the slices in force: in the back while it has
+/// room, then in the spill; the store that refuses one counts it. The
+/// spill stops short of its room by the scratch the stitch pass will want
+/// for all the pieces kept ([`path::stitch_reserve`]), in the slice
+/// memory, which the spill then shares with it.
+///
+/// When both are full it thins the surface ([`path::thin`]): the stride
+/// doubles, the pieces of the slices it no longer takes go, and the
+/// command is tried again; so a surface larger than the board holds is
+/// drawn whole at a coarser stride, not cut. Only when one slice of each
+/// plane is left is it cut, and what is kept is still stitched and
+/// ordered.
 struct Keep<'g, 'a, 's> {
     back: &'g mut Geometry<'a>,
     spill: &'g mut Geometry<'s>,
@@ -141,12 +150,25 @@ struct Keep<'g, 'a, 's> {
     frags: &'g mut u32,
     /// Bytes of the whole slice memory.
     memory: usize,
+    /// The slices in force.
+    stride: Stride,
+    /// The slice the commands come from: its axis (0 x for a y-z slice,
+    /// 1 y for an x-z, 2 z for an x-y) and index.
+    slice: (usize, u16),
+    /// Whether `stride` keeps that slice (asked once a row, not a command).
+    live: bool,
 }
 
-impl CommandSink<Point3> for Keep<'_, '_, '_> {
-    type Error = Infallible;
-    #[inline]
-    fn command(&mut self, _level: usize, c: Command<Point3>) -> Result<(), Infallible> {
+impl Keep<'_, '_, '_> {
+    /// The commands that follow come from slice `index` along `axis`.
+    fn enter_slice(&mut self, axis: usize, index: u16) {
+        self.slice = (axis, index);
+        self.live = self.stride.keeps(axis, index);
+    }
+
+    /// Where `c` goes (the back, else the spill) and whether it finds room
+    /// there.
+    fn place(&self, c: &Command<Point3>) -> (bool, bool) {
         let room = self.back.capacity().saturating_sub(self.back.len());
         // The back until the spill takes its first command (in order: the
         // spill's points come after all of the back's). A polyline may go on
@@ -154,21 +176,44 @@ impl CommandSink<Point3> for Keep<'_, '_, '_> {
         // last slot (were the spill full, that `MoveTo` would be left alone).
         let back = self.spill.capacity() == 0
             || (self.spill.is_empty() && (room > 1 || (room == 1 && !matches!(c, Command::MoveTo(_)))));
-        let starts = !matches!(c, Command::LineTo(_));
-        let kept = if back {
-            self.back.push(c).is_ok()
-        } else {
-            let frags = *self.frags as usize + usize::from(starts);
-            let points = self.back.len() + self.spill.len() + 1;
-            // Room for one more spilled point beside the stitch's scratch.
-            let need = Geometry::bytes_for(self.spill.len() + 1) + path::stitch_reserve(frags, points);
-            let cap = if need <= self.memory { usize::MAX } else { 0 };
-            self.spill.push_within(c, cap).is_ok()
-        };
-        if kept && starts {
-            *self.frags = self.frags.saturating_add(1);
+        if back {
+            return (true, room > 0);
         }
-        Ok(())
+        let frags = *self.frags as usize + usize::from(!matches!(c, Command::LineTo(_)));
+        let points = self.back.len() + self.spill.len() + 1;
+        // Room for one more spilled point beside the stitch's scratch.
+        let need = Geometry::bytes_for(self.spill.len() + 1) + path::stitch_reserve(frags, points);
+        (false, need <= self.memory && self.spill.len() < self.spill.capacity())
+    }
+}
+
+impl CommandSink<Point3> for Keep<'_, '_, '_> {
+    type Error = Infallible;
+    #[inline]
+    fn command(&mut self, _level: usize, c: Command<Point3>) -> Result<(), Infallible> {
+        loop {
+            if !self.live {
+                // A slice thinned away while it was being contoured.
+                return Ok(());
+            }
+            let (back, room) = self.place(&c);
+            let coarser = if room { None } else { self.stride.coarser() };
+            let Some(coarser) = coarser else {
+                let starts = !matches!(c, Command::LineTo(_));
+                let kept = if back {
+                    self.back.push(c).is_ok()
+                } else {
+                    self.spill.push_within(c, if room { usize::MAX } else { 0 }).is_ok()
+                };
+                if kept && starts {
+                    *self.frags = self.frags.saturating_add(1);
+                }
+                return Ok(());
+            };
+            self.stride = coarser;
+            self.live = coarser.keeps(self.slice.0, self.slice.1);
+            *self.frags = path::thin(self.back, self.spill, &self.stride);
+        }
     }
 }
 
@@ -278,6 +323,7 @@ impl<'a> Stream<'a> {
             stats: ContourStats::default(),
             job: None,
             frags: 0,
+            stride: Stride::new(spec.dims, spec.every),
         });
         // The spill starts after the transfer's two slots.
         self.spill = Some((2 * self.slot_bytes(), Held::empty(shift)));
@@ -325,7 +371,7 @@ impl<'a> Stream<'a> {
             t.last_ms = now_ms;
             if complete {
                 let mut job = Job { z: t.z, slot: self.cur, phase: Phase::Xy, next: 0 };
-                t.job = Self::ahead(&t.spec, &mut job).then_some(job);
+                t.job = Self::ahead(&t.spec, &t.stride, &mut job).then_some(job);
                 t.z += 1;
                 t.offset = 0;
             } else {
@@ -374,7 +420,15 @@ impl<'a> Stream<'a> {
             // (Making the contourer clears its 2 KB of scratch: a short row
             // should not pay that alone.)
             let mut done = 0usize;
-            let mut sink = Keep { back: geometry, spill: &mut spill, frags: &mut t.frags, memory };
+            let mut sink = Keep {
+                back: geometry,
+                spill: &mut spill,
+                frags: &mut t.frags,
+                memory,
+                stride: t.stride,
+                slice: (2, 0),
+                live: true,
+            };
             let (s0, s1) = slots.split_at(n.min(slots.len()));
             let slots = [s0, s1];
             loop {
@@ -386,7 +440,7 @@ impl<'a> Stream<'a> {
                     }
                 }
                 // Done as soon as the last row is: no empty call after it.
-                if !Self::ahead(&t.spec, &mut job) {
+                if !Self::ahead(&t.spec, &sink.stride, &mut job) {
                     left = false;
                     break;
                 }
@@ -394,6 +448,7 @@ impl<'a> Stream<'a> {
                     break;
                 }
             }
+            t.stride = sink.stride;
         } else {
             left = false;
         }
@@ -404,15 +459,21 @@ impl<'a> Stream<'a> {
         left
     }
 
-    /// Move `job` past the phases that are done or have nothing to do;
-    /// whether a row is left.
-    fn ahead(spec: &VolumeSpec, job: &mut Job) -> bool {
+    /// Move `job` past the phases that are done or have nothing to do, and
+    /// past the slices `stride` skips; whether a row is left.
+    fn ahead(spec: &VolumeSpec, stride: &Stride, job: &mut Job) -> bool {
         let [nx, ny] = [usize::from(spec.dims[0]), usize::from(spec.dims[1])];
-        let every = usize::from(spec.every.max(1));
         loop {
+            // To the next slice kept (the stride may have grown since the
+            // last row).
+            match job.phase {
+                Phase::Xy => {}
+                Phase::Xz => job.next = stride.next(1, job.next as usize).min(ny) as u32,
+                Phase::Yz => job.next = stride.next(0, job.next as usize).min(nx) as u32,
+            }
             let at = job.next as usize;
             let done = match job.phase {
-                Phase::Xy => spec.axes & AXIS_Z == 0 || usize::from(job.z) % every != 0 || at + 1 >= ny,
+                Phase::Xy => spec.axes & AXIS_Z == 0 || !stride.keeps(2, job.z) || at + 1 >= ny,
                 Phase::Xz => job.z == 0 || spec.axes & AXIS_Y == 0 || at >= ny,
                 Phase::Yz => job.z == 0 || spec.axes & AXIS_X == 0 || at >= nx,
             };
@@ -439,11 +500,10 @@ impl<'a> Stream<'a> {
         sink: &mut Keep<'_, '_, '_>,
         stats: &mut ContourStats,
     ) -> Option<usize> {
-        if !Self::ahead(spec, job) {
+        if !Self::ahead(spec, &sink.stride, job) {
             return None;
         }
         let [nx, ny] = [usize::from(spec.dims[0]), usize::from(spec.dims[1])];
-        let every = usize::from(spec.every.max(1));
         let at = job.next as usize;
         let ty = spec.sample_type;
         let (cur, prev): (&[u8], &[u8]) = if job.slot == 0 { (s0, s1) } else { (s1, s0) };
@@ -459,6 +519,7 @@ impl<'a> Stream<'a> {
                 decode(ty, cur, at * nx, 1, l);
                 decode(ty, cur, (at + 1) * nx, 1, h);
                 let z = f32::from(job.z);
+                sink.enter_slice(2, job.z);
                 let _ = rc.row(l, h, at, |x, y| Point3::new(x, y, z), sink, stats);
                 job.next += 1;
             }
@@ -467,16 +528,18 @@ impl<'a> Stream<'a> {
                 decode(ty, prev, at * nx, 1, l);
                 decode(ty, cur, at * nx, 1, h);
                 let y = at as f32;
+                sink.enter_slice(1, at as u16);
                 let _ = rc.row(l, h, below, |x, v| Point3::new(x, y, v), sink, stats);
-                job.next += every as u32;
+                job.next += 1;
             }
             Phase::Yz => {
                 // Row `z - 1` of subgrids of the y-z slice at x = `at`.
                 decode(ty, prev, at, nx, l);
                 decode(ty, cur, at, nx, h);
                 let x = at as f32;
+                sink.enter_slice(0, at as u16);
                 let _ = rc.row(l, h, below, |u, v| Point3::new(x, u, v), sink, stats);
-                job.next += every as u32;
+                job.next += 1;
             }
         }
         Some(n.saturating_sub(1).max(1))
@@ -494,7 +557,15 @@ mod tests {
         let (mut b, mut s) = (vec![0u8; Geometry::bytes_for(back)], vec![0u8; Geometry::bytes_for(spill)]);
         let (mut back, mut spill) = (Geometry::new(&mut b), Geometry::new(&mut s));
         let mut frags = 0;
-        let mut keep = Keep { back: &mut back, spill: &mut spill, frags: &mut frags, memory: usize::MAX };
+        let mut keep = Keep {
+            back: &mut back,
+            spill: &mut spill,
+            frags: &mut frags,
+            memory: usize::MAX,
+            stride: Stride::new([2; 3], 1),
+            slice: (2, 0),
+            live: true,
+        };
         for &c in cmds {
             let _ = keep.command(0, c);
         }

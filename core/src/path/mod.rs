@@ -54,6 +54,7 @@ mod stitch;
 pub mod store;
 #[cfg(test)]
 mod tests;
+pub mod thin;
 
 use index::Index;
 pub(crate) use index::stitch_reserve;
@@ -61,6 +62,8 @@ use merge::{Out, Walk};
 pub(crate) use order::Metric;
 pub use store::{Commands, Geometry, Kind, Packed};
 pub(crate) use store::{Held, Source};
+pub use thin::Stride;
+pub(crate) use thin::thin;
 
 /// What stitching and ordering (`chain`) did.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

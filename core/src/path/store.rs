@@ -195,6 +195,14 @@ impl<'a> Geometry<'a> {
         }
     }
 
+    /// Write slot `i` (held or not).
+    pub(crate) fn put(&mut self, i: usize, q: Packed, kind: Kind) {
+        if let Some(slot) = self.points.get_mut(i) {
+            *slot = pack(q);
+        }
+        self.set_kind(i, kind);
+    }
+
     /// Append a point of `kind`; false when full (counted).
     pub(crate) fn push_raw(&mut self, q: Packed, kind: Kind) -> bool {
         if self.held.len >= self.capacity() {
@@ -207,6 +215,11 @@ impl<'a> Geometry<'a> {
         self.set_kind(self.held.len, kind);
         self.held.len += 1;
         true
+    }
+
+    /// Hold the first `len` points written (at most the capacity).
+    pub(crate) fn set_len(&mut self, len: usize) {
+        self.held.len = len.min(self.capacity());
     }
 
     /// Drop the last point.

@@ -1,0 +1,225 @@
+//! Thinning a surface the memory cannot hold: a coarser slice stride, not
+//! a part of the surface.
+//!
+//! A volume asks for every `n`-th slice of each plane ([`Stride`]). When
+//! its pieces outgrow the memory (the stream's stores while contouring,
+//! or the picture when stitched), every other of those slices goes
+//! ([`thin`]) and contouring goes on at twice the stride: what is kept is
+//! whole slices across the whole volume, so the board still draws the
+//! whole object, coarser, and the picture is exactly the surface
+//! contoured at the stride it ends at.
+//!
+//! The strides are counted from the middle slice of each axis (rounded
+//! down to a slice asked for), both ways: at the stride asked for, that
+//! is the slices `0, n, 2n, ...` the wire format names; at the coarsest,
+//! it is the middle slice of each plane, not a border slice, which on real
+//! data (a head in air) is often empty.
+
+use super::store::{Geometry, Kind};
+
+/// Which slices of each plane are contoured: those `every` apart, from
+/// `anchor` (per axis: x for the y-z slices, y for the x-z, z for the
+/// x-y) both ways.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Stride {
+    /// Slices apart (at least 1).
+    pub every: u16,
+    /// A slice kept along each axis.
+    pub anchor: [u16; 3],
+    /// The most slices apart worth thinning to: one less than the longest
+    /// extent (past it, one slice of each plane is left anyway).
+    most: u16,
+}
+
+impl Stride {
+    /// What a volume of `dims` asking for every `every`-th slice
+    /// contours: the slices `0, every, 2 every, ...` of each plane.
+    pub fn new(dims: [u16; 3], every: u8) -> Self {
+        let every = u16::from(every.max(1));
+        let anchor = dims.map(|n| n / 2 / every * every);
+        let most = dims.iter().fold(0, |m, &d| m.max(d)).saturating_sub(1);
+        Self { every, anchor, most }
+    }
+
+    /// Whether slice `index` along `axis` (0 x, 1 y, 2 z) is contoured.
+    #[inline]
+    pub fn keeps(&self, axis: usize, index: u16) -> bool {
+        self.anchor.get(axis).is_some_and(|&c| index.abs_diff(c).is_multiple_of(self.every.max(1)))
+    }
+
+    /// The first slice at or after `index` along `axis` that is contoured.
+    pub fn next(&self, axis: usize, index: usize) -> usize {
+        let e = usize::from(self.every.max(1));
+        let r = self.anchor.get(axis).map_or(0, |&c| usize::from(c) % e);
+        index.saturating_add((r + e - index % e) % e)
+    }
+
+    /// Twice as many slices apart; `None` when that would leave no slice
+    /// out.
+    pub fn coarser(&self) -> Option<Self> {
+        (self.every <= self.most / 2).then(|| Self { every: 2 * self.every, ..*self })
+    }
+}
+
+/// Keep only the pieces of `back` then `spill` (one sequence, as the
+/// stitch pass reads them) that lie in a slice `stride` keeps: a piece is
+/// kept when, along some axis, all its points share one whole voxel
+/// coordinate and that slice is kept (the x-y slice `z`, the x-z slice
+/// `y`, the y-z slice `x`). What is kept stays in order and is packed from
+/// the start of `back` on, into `spill` when `back` is full. Returns the
+/// pieces kept.
+///
+/// A piece that lies in several slices (a dot at a grid node, a line along
+/// a grid line) stays if any of them does.
+pub(crate) fn thin(back: &mut Geometry<'_>, spill: &mut Geometry<'_>, stride: &Stride) -> u32 {
+    let old = back.len();
+    let room = back.capacity();
+    let shift = back.shift().min(12);
+    let whole = (1u16 << shift) - 1;
+    let read = |back: &Geometry<'_>, spill: &Geometry<'_>, i: usize| {
+        if i < old { back.get(i) } else { spill.get(i - old) }
+    };
+    let (mut r, mut w, mut kept) = (0usize, 0usize, 0u32);
+    while let Some((first, _)) = read(back, spill, r) {
+        // The piece: `r` and the `Line`s after it.
+        let mut end = r + 1;
+        // Axes along which every point so far is at `first`'s whole voxel.
+        let mut axes = first.map(|c| c & whole == 0);
+        while let Some((q, Kind::Line)) = read(back, spill, end) {
+            for ((on, c), f) in axes.iter_mut().zip(q).zip(first) {
+                *on &= c == f;
+            }
+            end += 1;
+        }
+        let keep = axes.iter().zip(first).enumerate().any(|(a, (&on, c))| on && stride.keeps(a, c >> shift));
+        if keep {
+            kept += 1;
+            for i in r..end {
+                // Writes stay behind reads (`w <= i`), in either store.
+                if let Some((q, k)) = read(back, spill, i) {
+                    if w < room {
+                        back.put(w, q, k);
+                    } else {
+                        spill.put(w - room, q, k);
+                    }
+                }
+                w += 1;
+            }
+        }
+        r = end;
+    }
+    back.set_len(w.min(room));
+    spill.set_len(w.saturating_sub(room));
+    kept
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::path::{Packed, Source};
+
+    fn store(n: usize) -> Vec<u8> {
+        vec![0; Geometry::bytes_for(n)]
+    }
+
+    #[test]
+    fn the_stride_asked_is_every_nth_from_zero_and_coarser_keeps_the_middle() {
+        let s = Stride::new([128, 128, 84], 4);
+        assert_eq!(s.anchor, [64, 64, 40]);
+        let kept = |s: &Stride, axis: usize, n: u16| (0..n).filter(|&i| s.keeps(axis, i)).collect::<Vec<_>>();
+        assert_eq!(kept(&s, 2, 84), (0..84).step_by(4).collect::<Vec<_>>());
+        let mut c = s;
+        let mut seen = vec![kept(&s, 2, 84)];
+        while let Some(next) = c.coarser() {
+            c = next;
+            let k = kept(&c, 2, 84);
+            // Each stride keeps a subset of the last one's slices, the
+            // middle among them.
+            assert!(k.iter().all(|i| seen.last().unwrap().contains(i)), "{k:?}");
+            assert!(k.contains(&40));
+            // `next` finds exactly the kept slices.
+            let mut walk = Vec::new();
+            let mut i = c.next(2, 0);
+            while i < 84 {
+                walk.push(i as u16);
+                i = c.next(2, i + 1);
+            }
+            assert_eq!(walk, k);
+            seen.push(k);
+        }
+        assert_eq!(c.every, 64);
+        assert_eq!(seen.last().unwrap(), &[40]);
+        assert_eq!(kept(&c, 0, 128), [0, 64]);
+        assert_eq!(Stride::new([2, 2, 1], 1).coarser(), None);
+    }
+
+    #[test]
+    fn thinning_keeps_whole_slices_in_order_packed_from_the_front() {
+        // Pieces in slices of all three planes (index 0..7), one to three
+        // points each; the other coordinates off the grid, so that one
+        // axis alone is whole. Kinds cycle through the starts.
+        let shift = 4u8;
+        let whole = |c: u16| c << shift;
+        let index = |i: u16| i * 5 % 7;
+        let pieces: Vec<Vec<Packed>> = (0..40u16)
+            .map(|i| {
+                let (axis, len) = (usize::from(i % 3), 1 + i % 3);
+                (0..len)
+                    .map(|k| {
+                        let mut q = [3 + 16 * k + i, 7 + 32 * k, 9 + 8 * i];
+                        q[axis] = whole(index(i));
+                        q
+                    })
+                    .collect()
+            })
+            .collect();
+        let starts = [Kind::Move, Kind::Loop, Kind::Dot];
+        let points: usize = pieces.iter().map(Vec::len).sum();
+        let mut stride = Stride::new([7, 7, 7], 1);
+        loop {
+            for room in [0, 1, 5, 17, points] {
+                let (mut a, mut b) = (store(room), store(points));
+                let (mut back, mut spill) = (Geometry::new(&mut a), Geometry::new(&mut b));
+                back.reset(shift);
+                spill.reset(shift);
+                let mut want = Vec::new();
+                for (i, piece) in pieces.iter().enumerate() {
+                    let i = i as u16;
+                    for (k, &q) in piece.iter().enumerate() {
+                        let kind = if k == 0 { starts[usize::from(i % 3)] } else { Kind::Line };
+                        if !back.push_raw(q, kind) {
+                            assert!(spill.push_raw(q, kind));
+                        }
+                        if stride.keeps(usize::from(i % 3), index(i)) {
+                            want.push((q, kind));
+                        }
+                    }
+                }
+                let kept = thin(&mut back, &mut spill, &stride);
+                let wanted = (0..40u16).filter(|&i| stride.keeps(usize::from(i % 3), index(i))).count();
+                assert_eq!(kept as usize, wanted, "{stride:?}, room {room}");
+                let s = Source::two(&back, &spill);
+                let got: Vec<_> = (0..s.len()).filter_map(|i| s.get(i)).collect();
+                assert_eq!(got, want, "{stride:?}, room {room}");
+                assert_eq!(back.len(), want.len().min(room), "the back fills first");
+            }
+            let Some(next) = stride.coarser() else { break };
+            stride = next;
+        }
+        assert_eq!(stride.every, 4);
+        // A dot at a grid node stays if any of its slices does; a line
+        // along a grid line too.
+        let (mut a, mut b) = (store(4), store(0));
+        let (mut back, mut spill) = (Geometry::new(&mut a), Geometry::new(&mut b));
+        back.reset(shift);
+        assert!(back.push_raw([whole(3), whole(5), whole(4)], Kind::Dot));
+        assert!(back.push_raw([whole(1), whole(3), 5], Kind::Move));
+        assert!(back.push_raw([whole(1), whole(3), 21], Kind::Line));
+        assert!(back.push_raw([whole(3), whole(3), whole(3)], Kind::Dot));
+        let four = Stride { every: 4, anchor: [0; 3], most: 100 };
+        assert_eq!(thin(&mut back, &mut spill, &four), 1);
+        assert_eq!(back.get(0), Some(([whole(3), whole(5), whole(4)], Kind::Dot)));
+        assert_eq!(back.len(), 1);
+    }
+}
