@@ -296,10 +296,8 @@ fn snapshot(engine: &Engine<'_>, size: u32, path: &Path) -> Result<()> {
     cfg.bits = beam.bits;
     let mut screen = Phosphor::new(cfg).context("invalid picture settings")?;
     screen.deposit(play_frame(engine, 1e6).samples().iter().copied());
-    let tmp = path.with_extension("png.tmp");
-    screen.write_png(&tmp).with_context(|| format!("cannot write {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))?;
-    Ok(())
+    // Whole or not at all: a viewer watching the file never reads half.
+    screen.write_png(path)
 }
 
 /// A connection the acceptor took, or turned away.

@@ -20,6 +20,7 @@
 //! - [`device`]: the virtual board: the core's device engine behind a
 //!   pseudo-terminal or TCP port, at a real UART's line rate.
 //! - [`tty`]: raw serial ports and pseudo-terminals.
+//! - [`outfile`]: output files written whole or not at all.
 //! - [`wav`]: the sample stream as a WAV file (X, Y and the beam) for a
 //!   DC-coupled sound card driving a real scope.
 
@@ -30,6 +31,7 @@ pub mod device;
 pub mod formats;
 pub mod info;
 pub mod link;
+pub mod outfile;
 pub mod phosphor;
 pub mod progress;
 pub mod scene;

@@ -12,6 +12,7 @@ use isoscope_sim::animate::{AnimConfig, AnimFormat, animate};
 use isoscope_sim::board::frames_for;
 use isoscope_sim::contour::{Job, contour_volume, work_units, write_csv};
 use isoscope_sim::link::WireVolume;
+use isoscope_sim::outfile::write_whole;
 use isoscope_sim::phosphor::PhosphorConfig;
 use isoscope_sim::progress::Progress;
 use isoscope_sim::scene::{self, Scene, SceneConfig, write_samples};
@@ -193,7 +194,8 @@ struct RenderArgs {
     #[arg(long, value_name = "FILE")]
     animate: Option<PathBuf>,
     /// Animation frames.
-    #[arg(long, default_value_t = 72)]
+    #[arg(long, default_value_t = 72,
+          value_parser = in_range::<1, { isoscope_sim::animate::MAX_FRAMES as u64 }, u32>)]
     anim_frames: u32,
     /// Degrees the animation turns in all (360: one full turn, looping).
     #[arg(long, default_value_t = 360.0, allow_hyphen_values = true)]
@@ -484,12 +486,10 @@ fn contour_svg(args: &ContourArgs) -> Result<()> {
     let scene = build_scene(&scene_args, false)?;
     let bits = args.view.bits;
     match &args.output {
-        Some(path) => {
-            let f =
-                std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
-            isoscope_sim::svg::write_svg(std::io::BufWriter::new(f), &scene.commands, bits)
+        Some(path) => write_whole(path, |w| {
+            isoscope_sim::svg::write_svg(w, &scene.commands, bits)
                 .with_context(|| format!("cannot write {}", path.display()))
-        }
+        }),
         None => match isoscope_sim::svg::write_svg(std::io::stdout().lock(), &scene.commands, bits) {
             Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
                 Err(e).context("cannot write to standard output")
@@ -552,12 +552,9 @@ fn contour(args: &ContourArgs) -> Result<()> {
     }
     if let Format::Csv = args.format {
         match &args.output {
-            Some(path) => {
-                let f = std::fs::File::create(path)
-                    .with_context(|| format!("cannot create {}", path.display()))?;
-                write_csv(std::io::BufWriter::new(f), &result, &levels)
-                    .with_context(|| format!("cannot write {}", path.display()))?;
-            }
+            Some(path) => write_whole(path, |w| {
+                write_csv(w, &result, &levels).with_context(|| format!("cannot write {}", path.display()))
+            })?,
             None => {
                 let out = std::io::stdout().lock();
                 if let Err(e) = write_csv(std::io::BufWriter::new(out), &result, &levels)
@@ -621,7 +618,7 @@ fn render(args: &RenderArgs) -> Result<()> {
     cfg.show_blanked = args.show_blanked;
     let progress = Progress::new("rendering frames", args.frames as usize);
     let screen = scene::render(&scene, cfg, args.frames, Some(&progress))?;
-    screen.write_png(&args.output).with_context(|| format!("cannot write {}", args.output.display()))?;
+    screen.write_png(&args.output)?;
     eprintln!(
         "isoscope-sim: wrote {} ({}x{}; {} polylines, {} samples, {:.1} frames/s at {} samples/s)",
         args.output.display(),
@@ -653,10 +650,11 @@ fn render_animation(args: &RenderArgs, path: &std::path::Path) -> Result<()> {
     picture.bits = args.scene.view.bits;
     picture.show_blanked = args.show_blanked;
     let anim = AnimConfig { frames: args.anim_frames, turn_deg: args.turn, format, ..AnimConfig::default() };
-    let f = std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
     let progress = Progress::new("animating", anim.frames as usize);
-    let st = animate(&volume, &cfg, picture, &anim, std::io::BufWriter::new(f), Some(&progress))
-        .with_context(|| format!("cannot write {}", path.display()))?;
+    let st = write_whole(path, |w| {
+        animate(&volume, &cfg, picture, &anim, w, Some(&progress))
+            .with_context(|| format!("cannot write {}", path.display()))
+    })?;
     eprintln!(
         "isoscope-sim: wrote {} ({} frames, {}x{}, {:.1} degrees a frame, {} bytes)",
         path.display(),
@@ -771,8 +769,7 @@ fn wav(args: &WavArgs) -> Result<()> {
         invert_beam: args.invert_beam,
         ..WavConfig::default()
     };
-    let st = write_wav_file(&args.output, &scene.samples, &wcfg)
-        .with_context(|| format!("cannot write {}", args.output.display()))?;
+    let st = write_wav_file(&args.output, &scene.samples, &wcfg)?;
     eprintln!(
         "isoscope-sim: wrote {} ({:.2} s at {} Hz, {} channels; one frame is {} samples: {:.1} frames/s)",
         args.output.display(),

@@ -91,8 +91,7 @@
 use isoscope_core::output::{Beam, Dac, Sample};
 use std::convert::Infallible;
 use std::fmt;
-use std::fs::File;
-use std::io::{BufWriter, Write};
+use std::io::Write;
 use std::path::Path;
 
 /// Largest accepted image width or height, in pixels.
@@ -616,15 +615,19 @@ impl Phosphor {
         out
     }
 
-    /// The picture as an 8-bit RGB PNG file.
+    /// The picture as an 8-bit RGB PNG file, written whole or not at all
+    /// ([`crate::outfile`]).
     ///
     /// # Errors
-    /// [`PhosphorError::Io`] if the file cannot be created or written,
-    /// [`PhosphorError::Png`] if the encoder fails.
-    pub fn write_png(&self, path: impl AsRef<Path>) -> Result<(), PhosphorError> {
-        let mut file = BufWriter::new(File::create(path).map_err(PhosphorError::Io)?);
-        self.png_to(&mut file)?;
-        file.flush().map_err(PhosphorError::Io)
+    /// The file cannot be created or written ([`PhosphorError::Io`] or
+    /// [`PhosphorError::Png`] inside, the path named).
+    pub fn write_png(&self, path: impl AsRef<Path>) -> anyhow::Result<()> {
+        let path = path.as_ref();
+        crate::outfile::write_whole(path, |w| {
+            anyhow::Context::with_context(self.png_to(w).map_err(PhosphorError::from), || {
+                format!("cannot write {}", path.display())
+            })
+        })
     }
 
     /// The picture as the bytes of an 8-bit RGB PNG file.
@@ -1142,7 +1145,7 @@ mod tests {
         assert_eq!(std::fs::read(&path).unwrap(), p.encode_png());
         std::fs::remove_file(&path).unwrap();
         let err = p.write_png("/nonexistent-dir/x.png").unwrap_err();
-        assert!(matches!(err, PhosphorError::Io(_)), "{err}");
+        assert!(format!("{err:#}").starts_with("cannot create /nonexistent-dir/x.png"), "{err:#}");
     }
 
     #[test]

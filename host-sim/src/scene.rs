@@ -363,7 +363,10 @@ pub fn write_samples(samples: &[Sample], path: &std::path::Path) -> Result<()> {
     for s in samples {
         let _ = writeln!(text, "{} {} {}", s.x, s.y, u8::from(s.beam == Beam::On));
     }
-    std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
+    crate::outfile::write_whole(path, |w| {
+        std::io::Write::write_all(w, text.as_bytes())
+            .with_context(|| format!("cannot write {}", path.display()))
+    })
 }
 
 /// Draw `frames` refreshes of the scene's frame on a simulated phosphor,

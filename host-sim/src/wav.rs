@@ -89,7 +89,6 @@
 use isoscope_core::beam::{BeamConfig, MIN_LIT_STEP};
 use isoscope_core::output::{Beam, Sample};
 use std::fmt;
-use std::fs::File;
 use std::io::{BufWriter, Seek, Write};
 use std::path::Path;
 
@@ -410,19 +409,19 @@ pub fn write_wav<W: Write + Seek>(out: W, frame: &[Sample], cfg: &WavConfig) -> 
     })
 }
 
-/// [`write_wav`] to a file at `path` (created or truncated).
+/// [`write_wav`] to a file at `path`, whole or not at all
+/// ([`crate::outfile`]).
 ///
 /// # Errors
-/// As [`write_wav`]; the configuration is checked before the file is
-/// created.
-pub fn write_wav_file(
-    path: impl AsRef<Path>,
-    frame: &[Sample],
-    cfg: &WavConfig,
-) -> Result<WavStats, WavError> {
+/// As [`write_wav`] (the configuration is checked before the file is
+/// created), or the file cannot be created or written; the path named.
+pub fn write_wav_file(path: impl AsRef<Path>, frame: &[Sample], cfg: &WavConfig) -> anyhow::Result<WavStats> {
+    use anyhow::Context as _;
+    let path = path.as_ref();
     sample_frames(cfg, frame.len())?;
-    let file = File::create(path).map_err(WavError::Io)?;
-    write_wav(file, frame, cfg)
+    crate::outfile::write_whole(path, |w| {
+        write_wav(w, frame, cfg).with_context(|| format!("cannot write {}", path.display()))
+    })
 }
 
 #[cfg(test)]
@@ -656,7 +655,7 @@ mod tests {
         assert!(write_wav_file(&path, &frame, &WavConfig { rate_hz: 0, ..base }).is_err());
         assert!(!path.exists());
         let e = write_wav_file("/nonexistent-dir/x.wav", &frame, &base).unwrap_err();
-        assert!(matches!(e, WavError::Io(_)), "{e}");
+        assert!(format!("{e:#}").starts_with("cannot create /nonexistent-dir/x.wav"), "{e:#}");
     }
 
     #[test]

@@ -867,3 +867,50 @@ fn size_and_count_options_have_ranges() {
         assert!(!err.contains("panicked"), "{args:?}: {err}");
     }
 }
+
+/// A command that fails, is refused or is killed half-way leaves the file
+/// it was to write as it was: outputs are written whole or not at all.
+#[test]
+fn outputs_are_written_whole_or_not_at_all() {
+    let dir = TempDir::new("whole");
+    let old = b"the picture from yesterday";
+    for (name, args) in [
+        ("k.gif", &["render", "--demo", "sphere:12", "--animate", "OUT", "--anim-frames", "0"][..]),
+        ("k.gif", &["render", "--demo", "sphere:12", "--animate", "OUT", "--turn", "nan"]),
+        ("k.png", &["render", "--demo", "sphere:12", "-o", "OUT", "--size", "0"]),
+        ("k.wav", &["wav", "--demo", "sphere:12", "-o", "OUT", "--seconds", "0"]),
+        ("k.svg", &["contour", "--demo", "sphere:12", "--format", "svg", "-o", "OUT", "--yaw", "inf"]),
+    ] {
+        let path = dir.file(name, old);
+        let args: Vec<&str> = args.iter().map(|a| if *a == "OUT" { path.as_str() } else { a }).collect();
+        let out = run(&args);
+        assert!(!out.status.success(), "{args:?} should fail");
+        assert_eq!(std::fs::read(&path).unwrap(), old, "{args:?} touched {name}");
+    }
+    // Killed while it writes: the old file stays (and a good run replaces it).
+    let path = dir.file("turning.gif", old);
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_isoscope-sim"))
+        .args([
+            "render",
+            "--demo",
+            "hydrogen:32",
+            "--animate",
+            &path,
+            "--anim-frames",
+            "400",
+            "--size",
+            "512",
+        ])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert_eq!(std::fs::read(&path).unwrap(), old, "a killed render touched the animation");
+    let out =
+        run(&["render", "--demo", "sphere:8", "--animate", &path, "--anim-frames", "2", "--size", "32"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(std::fs::read(&path).unwrap().starts_with(b"GIF89a"));
+}
