@@ -16,10 +16,10 @@ pub struct Summary {
     pub finite: usize,
     /// NaN or infinite samples.
     pub nonfinite: usize,
-    /// Smallest and largest finite value.
-    pub range: (f32, f32),
-    /// Mean of the finite values.
-    pub mean: f64,
+    /// Smallest and largest finite value (`None`: no finite sample).
+    pub range: Option<(f32, f32)>,
+    /// Mean of the finite values (`None`: no finite sample).
+    pub mean: Option<f64>,
     /// Counts in equal-width bins over `range`.
     pub histogram: Vec<u64>,
     /// Levels worth contouring: Otsu's threshold (the level that best
@@ -39,7 +39,8 @@ fn values(v: &LoadedVolume) -> (&'static str, Vec<f32>) {
 
 /// Otsu's threshold over a histogram of `bins` between `lo` and `hi`,
 /// restricted to bins `from..`; returns the level at the chosen bin edge.
-fn otsu(hist: &[u64], from: usize, lo: f32, hi: f32) -> Option<f32> {
+/// (In `f64`: the span of two `f32` may be past the `f32` range.)
+fn otsu(hist: &[u64], from: usize, lo: f64, hi: f64) -> Option<f32> {
     let h = hist.get(from..)?;
     let total: f64 = h.iter().map(|&c| c as f64).sum();
     if total == 0.0 || h.len() < 2 {
@@ -61,8 +62,8 @@ fn otsu(hist: &[u64], from: usize, lo: f32, hi: f32) -> Option<f32> {
             at = Some(from + i + 1);
         }
     }
-    let width = (hi - lo) / hist.len() as f32;
-    at.map(|b| lo + b as f32 * width)
+    let width = (hi - lo) / hist.len() as f64;
+    at.map(|b| (lo + b as f64 * width) as f32)
 }
 
 /// Summarise a volume with a histogram of `bins` bins.
@@ -70,18 +71,27 @@ pub fn summarize(v: &LoadedVolume, bins: usize) -> Summary {
     let bins = bins.max(2);
     let (dtype, vals) = values(v);
     let finite: Vec<f32> = vals.iter().copied().filter(|x| x.is_finite()).collect();
-    let (lo, hi) = finite.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
-    let mean = finite.iter().map(|&x| f64::from(x)).sum::<f64>() / finite.len().max(1) as f64;
+    let range = finite.iter().fold(None, |r: Option<(f32, f32)>, &x| match r {
+        None => Some((x, x)),
+        Some((a, b)) => Some((a.min(x), b.max(x))),
+    });
+    // Summed in f64 (a sum of f32 samples may pass the f32 range).
+    let mean =
+        (!finite.is_empty()).then(|| finite.iter().map(|&x| f64::from(x)).sum::<f64>() / finite.len() as f64);
     let mut histogram = vec![0u64; bins];
     let mut suggested = vec![];
-    if !finite.is_empty() && hi > lo {
+    if let Some((lo, hi)) = range.map(|(a, b)| (f64::from(a), f64::from(b)))
+        && hi > lo
+    {
+        let bin = |x: f64| ((((x - lo) / (hi - lo)) * bins as f64) as usize).min(bins - 1);
         for &x in &finite {
-            let b = (((x - lo) / (hi - lo)) * bins as f32) as usize;
-            histogram[b.min(bins - 1)] += 1;
+            if let Some(c) = histogram.get_mut(bin(f64::from(x))) {
+                *c += 1;
+            }
         }
         if let Some(t) = otsu(&histogram, 0, lo, hi) {
             suggested.push(t);
-            let from = (((t - lo) / (hi - lo)) * bins as f32).round() as usize;
+            let from = (((f64::from(t) - lo) / (hi - lo)) * bins as f64).round() as usize;
             if let Some(t2) = otsu(&histogram, from, lo, hi).filter(|&t2| t2 > t) {
                 suggested.push(t2);
             }
@@ -94,7 +104,7 @@ pub fn summarize(v: &LoadedVolume, bins: usize) -> Summary {
         spacing: v.spacing,
         finite: finite.len(),
         nonfinite: vals.len() - finite.len(),
-        range: if finite.is_empty() { (f32::NAN, f32::NAN) } else { (lo, hi) },
+        range,
         mean,
         histogram,
         suggested,
@@ -111,19 +121,31 @@ impl Summary {
         let _ = writeln!(s, "spacing={}x{}x{}", self.spacing[0], self.spacing[1], self.spacing[2]);
         let _ = writeln!(s, "samples={}", self.finite + self.nonfinite);
         let _ = writeln!(s, "nonfinite={}", self.nonfinite);
-        let _ = writeln!(s, "min={}", self.range.0);
-        let _ = writeln!(s, "max={}", self.range.1);
-        let _ = writeln!(s, "mean={:.6}", self.mean);
+        // No finite sample: no minimum, maximum or mean (not NaN or -0).
+        match self.range {
+            Some((lo, hi)) => {
+                let _ = writeln!(s, "min={lo}");
+                let _ = writeln!(s, "max={hi}");
+            }
+            None => s.push_str("min=none\nmax=none\n"),
+        }
+        match self.mean {
+            Some(m) => {
+                let _ = writeln!(s, "mean={m:.6}");
+            }
+            None => s.push_str("mean=none\n"),
+        }
         let levels: Vec<String> = self.suggested.iter().map(|l| format!("{l}")).collect();
         let _ = writeln!(s, "suggested_levels={}", levels.join(","));
         let peak = self.histogram.iter().copied().max().unwrap_or(1).max(1);
-        let (lo, hi) = self.range;
-        let width = (hi - lo) / self.histogram.len() as f32;
+        let Some((lo, hi)) = self.range else { return s };
+        let (lo, hi) = (f64::from(lo), f64::from(hi));
+        let width = (hi - lo) / self.histogram.len() as f64;
         for (i, &c) in self.histogram.iter().enumerate() {
             // Bars on a log scale: background peaks would flatten the rest.
             let frac = if c == 0 { 0.0 } else { (1.0 + c as f64).ln() / (1.0 + peak as f64).ln() };
             let bar = "#".repeat((frac * 40.0).round() as usize);
-            let _ = writeln!(s, "# {:>12.4} {:>10} {bar}", lo + i as f32 * width, c);
+            let _ = writeln!(s, "# {:>12.4} {:>10} {bar}", lo + i as f64 * width, c);
         }
         s
     }
@@ -141,7 +163,7 @@ mod tests {
             (0..1000).map(|i| if i < 600 { 8 + (i % 5) as u8 } else { 95 + (i % 11) as u8 }).collect();
         let v = LoadedVolume { dims: Dims(10, 10, 10), samples: Samples::U8(s), spacing: UNIT_SPACING };
         let sum = summarize(&v, 64);
-        assert_eq!((sum.range, sum.finite, sum.nonfinite), ((8.0, 105.0), 1000, 0));
+        assert_eq!((sum.range, sum.finite, sum.nonfinite), (Some((8.0, 105.0)), 1000, 0));
         assert!(sum.suggested[0] > 12.0 && sum.suggested[0] < 95.0, "{:?}", sum.suggested);
         assert_eq!(sum.histogram.iter().sum::<u64>(), 1000);
         let r = sum.report();
@@ -156,8 +178,34 @@ mod tests {
             spacing: UNIT_SPACING,
         };
         let sum = summarize(&v, 8);
-        assert_eq!((sum.finite, sum.nonfinite, sum.range), (2, 2, (1.0, 1.0)));
+        assert_eq!((sum.finite, sum.nonfinite, sum.range), (2, 2, Some((1.0, 1.0))));
         assert!(sum.suggested.is_empty());
         let _ = sum.report();
+        // All NaN: no range and no mean, said so (not NaN, not -0).
+        let v = LoadedVolume { samples: Samples::F32(vec![f32::NAN; 4]), ..v };
+        let r = summarize(&v, 8).report();
+        assert!(r.contains("min=none\nmax=none\nmean=none\n"), "{r}");
+        assert!(!r.contains("NaN") && !r.contains("-0"), "{r}");
+    }
+
+    #[test]
+    fn a_volume_spanning_past_the_f32_range_has_finite_edges_and_levels() {
+        // -3e38 .. 3e38: their difference is past f32::MAX.
+        let s: Vec<f32> = (0..1000)
+            .map(|i| if i < 600 { -3e38 + i as f32 * 1e33 } else { 3e38 - i as f32 * 1e33 })
+            .collect();
+        let v = LoadedVolume { dims: Dims(10, 10, 10), samples: Samples::F32(s), spacing: UNIT_SPACING };
+        let sum = summarize(&v, 16);
+        assert_eq!(sum.histogram.iter().sum::<u64>(), 1000);
+        assert!(
+            !sum.suggested.is_empty() && sum.suggested.iter().all(|l| l.is_finite()),
+            "{:?}",
+            sum.suggested
+        );
+        let (lo, hi) = sum.range.unwrap();
+        assert!(sum.suggested[0] > lo && sum.suggested[0] < hi);
+        let r = sum.report();
+        assert!(!r.contains("NaN") && !r.contains("inf"), "{r}");
+        assert!(sum.mean.unwrap().is_finite());
     }
 }

@@ -83,6 +83,29 @@ impl ViewSetting {
     pub fn perspective(&self) -> Option<f32> {
         (self.fov_deg != 0.0).then_some(self.fov_deg)
     }
+
+    /// Check it as the board will (the core's view fit), so that a bad
+    /// angle is refused before a port is opened, not by the board after
+    /// the volume.
+    ///
+    /// # Errors
+    /// An angle or the spin is not finite, or the field of view is out of
+    /// the core's range.
+    pub fn check(&self) -> Result<()> {
+        use isoscope_core::view::{Bounds, Projection, View, ViewTransform};
+        let [yaw, pitch, roll] = self.angles;
+        let projection = match self.perspective() {
+            Some(fov_deg) => Projection::Perspective { fov_deg },
+            None => Projection::Orthographic,
+        };
+        let view = View { yaw, pitch, roll, projection, ..View::DEFAULT };
+        let unit = Bounds::of_volume(2, 2, 2).map_err(|e| anyhow!("{e}"))?;
+        ViewTransform::fit(&view, unit).map_err(|e| anyhow!("invalid view: {e}"))?;
+        if !self.spin_deg_per_s.is_finite() {
+            bail!("invalid view: the spin is not finite");
+        }
+        Ok(())
+    }
 }
 
 /// How to send.
@@ -104,6 +127,32 @@ pub struct SendConfig {
     pub view: Option<ViewSetting>,
     /// Timeouts in a row before giving up.
     pub max_timeouts: u32,
+}
+
+impl SendConfig {
+    /// Check what can be checked before a port is opened: the levels (at
+    /// most [`isoscope_core::wire::MAX_LEVELS`], finite), the chunk size,
+    /// the window and the view.
+    ///
+    /// # Errors
+    /// Which setting is wrong and why.
+    pub fn check(&self) -> Result<Levels> {
+        let levels = Levels::from_slice(&self.levels)
+            .with_context(|| format!("at most {} levels go to the board", isoscope_core::wire::MAX_LEVELS))?;
+        if !self.levels.iter().all(|l| l.is_finite()) {
+            bail!("a level is not finite");
+        }
+        if self.chunk == 0 || self.chunk > MAX_CHUNK {
+            bail!("the chunk size must be 1..={MAX_CHUNK} bytes");
+        }
+        if self.window == 0 {
+            bail!("the send window must be at least 1 frame");
+        }
+        if let Some(v) = &self.view {
+            v.check()?;
+        }
+        Ok(levels)
+    }
 }
 
 impl Default for SendConfig {
@@ -419,11 +468,7 @@ where
     R: Read + Send + 'static,
     W: Write,
 {
-    let levels = Levels::from_slice(&cfg.levels)
-        .with_context(|| format!("at most {} levels go to the board", isoscope_core::wire::MAX_LEVELS))?;
-    if cfg.chunk == 0 || cfg.chunk > MAX_CHUNK {
-        bail!("the chunk size must be 1..={MAX_CHUNK} bytes");
-    }
+    let levels = cfg.check()?;
     let listener = Listener::start(reader);
     // Every command frame, in order, with consecutive sequence numbers from
     // seq0, which the Hello announces.

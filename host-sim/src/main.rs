@@ -451,7 +451,13 @@ fn load(source: &Source) -> Result<(LoadedVolume, Option<DemoSpec>)> {
             let dims = source.dims.context("a raw volume file needs --dims NXxNYxNZ (and --dtype)")?;
             let dtype = source.dtype.context("a raw volume file needs --dtype u8|u16|i16|f32")?;
             let endian = source.endian.unwrap_or_default();
+            if source.volume_index > 0 {
+                bail!("a raw file holds one volume; --volume {} asks for another", source.volume_index);
+            }
             Ok((LoadedVolume::read_raw_endian(path, dims, dtype, endian)?, None))
+        }
+        (None, Some(_)) if source.volume_index > 0 => {
+            bail!("a demo is one volume; --volume {} asks for another", source.volume_index)
         }
         (None, Some(spec)) => Ok((LoadedVolume::demo(spec)?, Some(spec))),
         _ => bail!("give a volume file (with --dims and --dtype) or --demo NAME:N"),
@@ -839,6 +845,9 @@ fn send(args: &SendArgs) -> Result<()> {
         view,
         ..SendConfig::default()
     };
+    // The settings before the port: a bad one is refused here, not by the
+    // board after the volume.
+    cfg.check()?;
     let (reader, writer) = open_port(&args.port, args.baud)?;
     let chunks_per_slice = wire.slice_bytes().div_ceil(cfg.chunk.max(1));
     let total = 2 + chunks_per_slice * usize::from(wire.dims[2]) + usize::from(view.is_some());

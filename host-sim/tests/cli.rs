@@ -914,3 +914,36 @@ fn outputs_are_written_whole_or_not_at_all() {
     assert!(out.status.success(), "{}", text(&out.stderr));
     assert!(std::fs::read(&path).unwrap().starts_with(b"GIF89a"));
 }
+
+/// Numbers a user would act on are right or refused: a raw file or a demo
+/// has no second volume, a bad view is refused before the port opens, an
+/// all-NaN volume has no mean (not -0), and a volume spanning past the f32
+/// range still gets finite histogram edges and suggested levels.
+#[test]
+fn wrong_numbers_are_refused_or_said_plainly() {
+    let dir = TempDir::new("numbers");
+    let raw = dir.file("z.raw", &[0u8; 64]);
+    let out = run(&["info", &raw, "--dims", "4x4x4", "--dtype", "u8", "--volume", "5"]);
+    assert!(!out.status.success());
+    assert!(text(&out.stderr).contains("a raw file holds one volume; --volume 5 asks for another"));
+    let out = run(&["info", "--demo", "sphere:8", "--volume", "1"]);
+    assert!(text(&out.stderr).contains("a demo is one volume"), "{}", text(&out.stderr));
+    let out = run(&["send", "--demo", "sphere:8", "--yaw", "inf", "--port", "tcp:127.0.0.1:1"]);
+    let err = text(&out.stderr);
+    assert!(!out.status.success() && err.contains("invalid view"), "{err}");
+    assert!(!err.contains("Connection refused"), "the port was opened first: {err}");
+    let nan: Vec<u8> = std::iter::repeat_n(f32::NAN.to_le_bytes(), 8).flatten().collect();
+    let nan = dir.file("nan.raw", &nan);
+    let out = run(&["info", &nan, "--dims", "2x2x2", "--dtype", "f32"]);
+    let report = text(&out.stdout);
+    assert!(report.contains("min=none\nmax=none\nmean=none\n"), "{report}");
+    let wide: Vec<u8> = (0..64)
+        .flat_map(|i| (if i % 3 == 0 { -3e38f32 } else { 3e38 - i as f32 * 1e36 }).to_le_bytes())
+        .collect();
+    let wide = dir.file("wide.raw", &wide);
+    let out = run(&["info", &wide, "--dims", "4x4x4", "--dtype", "f32"]);
+    let report = text(&out.stdout);
+    assert!(!report.contains("NaN") && !report.contains("inf"), "{report}");
+    let levels = report.lines().find_map(|l| l.strip_prefix("suggested_levels=")).unwrap_or("");
+    assert!(!levels.is_empty(), "{report}");
+}

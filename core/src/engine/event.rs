@@ -139,7 +139,10 @@ impl core::fmt::Display for Event {
             Self::BeamSet => f.write_str("beam set"),
             Self::Redrawn { polylines, points, blank_permille, refresh_centi_hz } => write!(
                 f,
-                "redrawn polylines={polylines} points={points} blank={}.{}% refresh_hz={}.{:02}",
+                // Blanked travel over lit length (the README's measure): a
+                // ratio, past 100% when the jumps outrun the lines (a few
+                // dots far apart), so not written as a share.
+                "redrawn polylines={polylines} points={points} blank/lit={}.{}% refresh_hz={}.{:02}",
                 blank_permille / 10,
                 blank_permille % 10,
                 refresh_centi_hz / 100,
