@@ -707,6 +707,39 @@ fn abandoned_transfer_times_out_and_is_superseded() {
 }
 
 #[test]
+fn a_sender_still_at_it_on_a_noisy_line_keeps_its_transfer() {
+    // Frame 1 of the slices is lost again and again; the sender's later
+    // frames (out of order) keep coming whole for 12 s, longer than the
+    // transfer timeout, before frame 1 gets through: the transfer is kept
+    // (on a 3e-3 line the board abandoned such transfers while the sender
+    // was still retrying).
+    let v = Vol::demo(Demo::Sphere, 10, SampleType::U8);
+    let mut mem = big();
+    let mut e = engine(&mut mem);
+    let mut host = Host::new();
+    e.feed(&host.hello(), 0);
+    e.feed(&host.begin(&v), 1000);
+    let slices = host.slices(&v, 40);
+    e.feed(&slices[0], 1000);
+    for t in (4000..=13_000).step_by(3000) {
+        e.feed(&slices[2], t);
+        e.update(t);
+        assert_eq!(e.state(), DeviceState::Receiving, "at {t} ms");
+    }
+    assert!(nacks(&answers(&mut e)).contains(&NackCode::OutOfOrder));
+    for s in &slices[1..] {
+        e.feed(s, 14_000);
+    }
+    e.feed(&host.end(), 14_000);
+    e.update(14_000);
+    let ev = events(&mut e);
+    assert!(!ev.iter().any(|x| matches!(x, Event::Aborted { .. })), "{ev:?}");
+    assert_eq!(e.state(), DeviceState::Showing);
+    assert_eq!(shown(&e), batch(&v));
+    // Silence still times a transfer out (`abandoned_transfer_times_out...`).
+}
+
+#[test]
 fn retransmitted_commands_are_answered_again_not_applied_twice() {
     let v = Vol::demo(Demo::Sphere, 10, SampleType::U8);
     let mut mem = big();

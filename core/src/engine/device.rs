@@ -163,7 +163,16 @@ impl Device<'_> {
             | Message::EndVolume { seq }
             | Message::SetLevels { seq, .. }
             | Message::SetView { seq, .. }
-            | Message::SetBeam { seq, .. } => seq,
+            | Message::SetBeam { seq, .. } => {
+                // A whole command, even one out of order or sent again,
+                // shows the sender is still at it: on a noisy line the next
+                // one may take a while to arrive whole, and the transfer
+                // waits for it (only silence times it out).
+                if let Some(t) = self.stream.transfer.as_mut() {
+                    t.last_ms = now_ms;
+                }
+                seq
+            }
             // The MCU's own messages have no business coming in.
             Message::Capabilities { .. }
             | Message::Ack { .. }

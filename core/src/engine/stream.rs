@@ -71,7 +71,8 @@ pub(crate) struct Transfer {
     pub z: u16,
     /// Bytes of slice `z` received.
     pub offset: u32,
-    /// When the last accepted message of the transfer came (ms).
+    /// When the last whole command came (ms): accepted, or out of order
+    /// or sent again (the sender is still at it).
     pub last_ms: u32,
     /// Contouring so far.
     pub stats: ContourStats,
