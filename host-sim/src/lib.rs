@@ -21,6 +21,8 @@
 //!   pseudo-terminal or TCP port, at a real UART's line rate.
 //! - [`tty`]: raw serial ports and pseudo-terminals.
 //! - [`outfile`]: output files written whole or not at all.
+//! - [`relay`]: a noisy line between a sender and a board, for testing
+//!   links.
 //! - [`wav`]: the sample stream as a WAV file (X, Y and the beam) for a
 //!   DC-coupled sound card driving a real scope.
 
@@ -34,6 +36,7 @@ pub mod link;
 pub mod outfile;
 pub mod phosphor;
 pub mod progress;
+pub mod relay;
 pub mod scene;
 pub mod svg;
 pub mod tty;

@@ -181,6 +181,9 @@ pub struct BoardInfo {
     pub sample_types: u8,
     /// Points its display list holds.
     pub display_points: u32,
+    /// Hellos sent before it answered (1 on a clean line; each more is a
+    /// timeout and a retransmission).
+    pub hellos: u32,
 }
 
 /// What a transfer did.
@@ -351,7 +354,7 @@ fn handshake(w: &mut impl Write, l: &Listener, seq0: u16) -> Result<BoardInfo> {
         firmware: crate_version(),
         seq: seq0,
     })?);
-    for _ in 0..3 {
+    for hellos in 1..=3 {
         w.write_all(&hello).context("cannot write to the port")?;
         w.flush()?;
         let deadline = Instant::now() + Duration::from_millis(1500);
@@ -376,6 +379,7 @@ fn handshake(w: &mut impl Write, l: &Listener, seq0: u16) -> Result<BoardInfo> {
                         max_slice_samples,
                         sample_types,
                         display_points,
+                        hellos,
                     });
                 }
                 Ok(Reply::Msg(OwnedReply::Nack(_, NackCode::Busy))) if firmware.is_none() => {
@@ -508,9 +512,10 @@ where
         payload_bytes: vol.bytes.len() as u64,
         wire_bytes: 0,
         frames: n as u64,
-        retransmitted: 0,
+        // A Hello sent again is a frame retransmitted after a timeout.
+        retransmitted: u64::from(board.hellos.saturating_sub(1)),
         nacks: Vec::new(),
-        timeouts: 0,
+        timeouts: board.hellos.saturating_sub(1),
         seconds: 0.0,
         end_ack_seconds: 0.0,
         picture_seconds: None,

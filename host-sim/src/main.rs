@@ -71,6 +71,47 @@ enum Cmd {
     /// (or TCP port) at a real UART's line rate, one line per event, and a
     /// PNG of the screen whenever it changes.
     Device(DeviceArgs),
+    /// A noisy line for testing links: relay TCP clients to a board (e.g.
+    /// `device --tcp`), flipping, dropping and doubling bytes and frames
+    /// both ways at the rates given, from a seed; one line a client says
+    /// what was done.
+    Relay(RelayArgs),
+}
+
+#[derive(Args, Debug)]
+struct RelayArgs {
+    /// Address to listen on (127.0.0.1:0 picks a free port); the address is
+    /// the first line printed.
+    #[arg(long, value_name = "ADDR", default_value = "127.0.0.1:0")]
+    listen: String,
+    /// The board's TCP address (`device --tcp` prints it).
+    #[arg(long, value_name = "HOST:PORT")]
+    to: String,
+    /// Probability that a byte has a bit flipped, 0 to 1.
+    #[arg(long, default_value_t = 0.0, value_parser = parse_probability)]
+    flip: f64,
+    /// Probability that a byte is lost.
+    #[arg(long, default_value_t = 0.0, value_parser = parse_probability)]
+    drop: f64,
+    /// Probability that a byte arrives twice.
+    #[arg(long, default_value_t = 0.0, value_parser = parse_probability)]
+    dup: f64,
+    /// Probability that a whole frame (up to a 0x00 delimiter) is lost.
+    #[arg(long, default_value_t = 0.0, value_parser = parse_probability)]
+    drop_frame: f64,
+    /// Probability that a whole frame arrives twice.
+    #[arg(long, default_value_t = 0.0, value_parser = parse_probability)]
+    dup_frame: f64,
+    /// Lose the N-th frame towards the board (from 0, on each connection);
+    /// repeatable.
+    #[arg(long, value_name = "N")]
+    lose_frame: Vec<u64>,
+    /// Seed of the damage (the n-th client gets seed + n).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Exit after this many clients.
+    #[arg(long, value_name = "N", value_parser = in_range::<1, 4_294_967_295, u64>)]
+    exit_after: Option<u64>,
 }
 
 #[derive(Args, Debug)]
@@ -907,6 +948,37 @@ fn device(args: &DeviceArgs) -> Result<()> {
     Ok(())
 }
 
+fn relay(args: &RelayArgs) -> Result<()> {
+    use isoscope_sim::relay::{Noise, serve};
+    // Frames towards the board are lost as named; the answers only by rate.
+    let noise = Noise {
+        flip: args.flip,
+        drop: args.drop,
+        dup: args.dup,
+        drop_frame: args.drop_frame,
+        dup_frame: args.dup_frame,
+        lose: args.lose_frame.clone(),
+    };
+    let listener = std::net::TcpListener::bind(&args.listen)
+        .with_context(|| format!("cannot listen on {}", args.listen))?;
+    print_out(&format!("{}\n", listener.local_addr()?))?;
+    let mut clients = 0u64;
+    serve(&listener, &args.to, &noise, args.seed, |damage| {
+        clients += 1;
+        let _ = print_out(&format!("client={clients} {}\n", damage.report()));
+        args.exit_after.is_none_or(|n| clients < n)
+    })
+}
+
+/// A probability: a number from 0 to 1.
+fn parse_probability(s: &str) -> Result<f64, String> {
+    let p: f64 = s.trim().parse().map_err(|_| format!("`{s}` is not a number"))?;
+    if !(0.0..=1.0).contains(&p) {
+        return Err(format!("`{s}` is not a probability: give 0 to 1"));
+    }
+    Ok(p)
+}
+
 fn stats(args: &StatsArgs) -> Result<()> {
     let scene = build_scene(args, false)?;
     print_out(&scene.report())?;
@@ -938,6 +1010,7 @@ fn main() -> ExitCode {
         Cmd::Wav(a) => wav(a),
         Cmd::Send(a) => send(a),
         Cmd::Device(a) => device(a),
+        Cmd::Relay(a) => relay(a),
         Cmd::Info(a) => {
             load(&a.source).and_then(|(v, _)| print_out(&isoscope_sim::info::summarize(&v, a.bins).report()))
         }
