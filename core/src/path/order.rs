@@ -217,7 +217,7 @@ impl Tour {
                 }
             }
             for _ in 0..16 {
-                let a = self.two_opt_near(x, &near, &mut budget);
+                let a = self.two_opt(x, Some(&near), 0, &mut budget);
                 let b = self.or_opt(x, Some(&near), 0, &mut budget);
                 self.best_entries(x, start);
                 if !(a || b) || budget == 0 {
@@ -237,7 +237,7 @@ impl Tour {
         let window = ((SEARCH_BUDGET / 8) / n.max(1)).max(WINDOW as u64).min(n) as usize;
         let mut budget = SEARCH_BUDGET;
         for _ in 0..8 {
-            let a = self.two_opt(x, window, &mut budget);
+            let a = self.two_opt(x, None, window, &mut budget);
             let b = self.or_opt(x, None, window, &mut budget);
             if !(a || b) || budget == 0 {
                 break;
@@ -429,95 +429,6 @@ impl Tour {
         true
     }
 
-    /// 2-opt among screen neighbours: a run reversed where a step's exit
-    /// is near the exit of a later one, or its entry near the entry of an
-    /// earlier one, closer than the jump it leaves by. Returns whether it
-    /// reversed one.
-    pub(super) fn two_opt_near(&self, x: &mut Index<'_, '_>, near: &Near, budget: &mut u64) -> bool {
-        let n = self.len;
-        if n < 3 {
-            return false;
-        }
-        self.measure_all(x);
-        let m = self.metric;
-        let mut any = false;
-        for i in 0..n - 1 {
-            if *budget == 0 {
-                break;
-            }
-            // The jump out of step i, replaced by one to a later step's exit:
-            // reverse i + 1 ..= j.
-            let (_, oi) = self.get(&x.w, i);
-            let mut found = None;
-            near.each_near(
-                x,
-                m,
-                x.point(oi),
-                self.jump(&x.w, i),
-                |x, c, budget| {
-                    let j = near.pos(x, c);
-                    if found.is_some() || j < i + 2 || self.get(&x.w, j).1 != c {
-                        return;
-                    }
-                    *budget = budget.saturating_sub(1);
-                    let old = self.jump(&x.w, i) + if j + 1 < n { self.jump(&x.w, j) } else { 0.0 };
-                    let in_i1 = self.ends(x, i + 1).0;
-                    let new = m.d(x.point(oi), x.point(c))
-                        + if j + 1 < n { m.d(in_i1, self.ends(x, j + 1).0) } else { 0.0 };
-                    if new + 1e-3 < old {
-                        found = Some(j);
-                    }
-                },
-                budget,
-            );
-            if let Some(j) = found {
-                self.reverse(x, i + 1, j);
-                *budget = budget.saturating_sub((j - i) as u64);
-                self.measure(x, i);
-                if j + 1 < n {
-                    self.measure(x, j);
-                }
-                near.place(x, self, i + 1, j);
-                any = true;
-                continue;
-            }
-            // The jump into step i + 1, replaced by one from an earlier
-            // step's entry: reverse l ..= i.
-            if i == 0 {
-                continue;
-            }
-            let (e1, _) = self.get(&x.w, i + 1);
-            near.each_near(
-                x,
-                m,
-                x.point(e1),
-                self.jump(&x.w, i),
-                |x, c, budget| {
-                    let l = near.pos(x, c);
-                    if found.is_some() || l == 0 || l >= i || self.get(&x.w, l).0 != c {
-                        return;
-                    }
-                    *budget = budget.saturating_sub(1);
-                    let old = self.jump(&x.w, l - 1) + self.jump(&x.w, i);
-                    let new = m.d(self.ends(x, l - 1).1, self.ends(x, i).1) + m.d(x.point(c), x.point(e1));
-                    if new + 1e-3 < old {
-                        found = Some(l);
-                    }
-                },
-                budget,
-            );
-            if let Some(l) = found {
-                self.reverse(x, l, i);
-                *budget = budget.saturating_sub((i - l + 1) as u64);
-                self.measure(x, l - 1);
-                self.measure(x, i);
-                near.place(x, self, l, i);
-                any = true;
-            }
-        }
-        any
-    }
-
     /// Move the `len` steps from `i` (at most [`OR_CHAIN`]) to just after
     /// step `k` (counted before the move, outside the run), drawn the
     /// other way round if `flip`, and measure the jumps again. Returns
@@ -567,62 +478,143 @@ impl Tour {
         dest
     }
 
-    /// 2-opt: reverse a run of up to [`WINDOW`] steps (each drawn the other
-    /// way) where that shortens the two jumps at its ends; first
-    /// improvement, until a pass finds none (at most 8 passes).
+    /// 2-opt, one pass: for each step, a run after it reversed (each step
+    /// drawn the other way) where that shortens the two jumps at the run's
+    /// ends; first improvement. The runs tried: with `near`, those ending at
+    /// a step whose exit is near this step's exit on the screen (closer
+    /// than the jump it leaves by), and those starting at a step whose
+    /// entry is near the next step's entry; without, the runs of up to
+    /// `window` steps. Returns whether it reversed one.
     ///
     /// The jumps' lengths are kept with the steps (and mended after a
     /// reversal), and a candidate whose first new jump alone is surely no
     /// shorter than the two old ones is turned down without a square root:
     /// the same moves as measuring every jump afresh, at a fraction of the
     /// cost.
-    pub(super) fn two_opt(&self, x: &mut Index<'_, '_>, window: usize, budget: &mut u64) -> bool {
+    pub(super) fn two_opt(
+        &self,
+        x: &mut Index<'_, '_>,
+        near: Option<&Near>,
+        window: usize,
+        budget: &mut u64,
+    ) -> bool {
         let n = self.len;
         if n < 3 {
             return false;
         }
         self.measure_all(x);
         let m = self.metric;
-        let mut improved = true;
+        // Whether the jumps `a -> b` and `c -> d` (none past the last step)
+        // are longer than `a -> c` and `b -> d`: reversing the run between
+        // them draws the latter.
+        let better = |old: f32, a: Packed, c: Packed, bd: Option<(Packed, Packed)>| {
+            // `length` is within 1e-6 of the true root: a first new jump
+            // this long is no shorter than `old`, nor is the new pair.
+            if m.d2(a, c) * 0.999_99 >= old * old {
+                return false;
+            }
+            m.d(a, c) + bd.map_or(0.0, |(b, d)| m.d(b, d)) + 1e-3 < old
+        };
         let mut any = false;
-        let mut passes = 0;
-        while improved && *budget > 0 && passes < 8 {
-            passes += 1;
-            improved = false;
-            for i in 0..n - 1 {
-                // The jump into step i + 1 comes from step i's exit; step 0
-                // is never moved, so the jump from the start stays.
-                let out_i = self.ends(x, i).1;
-                let in_i1 = self.ends(x, i + 1).0;
-                let before = self.jump(&x.w, i);
-                for j in i + 2..n.min(i + 2 + window) {
+        for i in 0..n - 1 {
+            if *budget == 0 {
+                break;
+            }
+            // The jump out of step i, replaced by one to a later step j's
+            // exit: reverse i + 1 ..= j.
+            let out_i = self.ends(x, i).1;
+            let in_i1 = self.ends(x, i + 1).0;
+            let before = self.jump(&x.w, i);
+            let try_j = |x: &Index<'_, '_>, j: usize| {
+                let old = before + if j + 1 < n { self.jump(&x.w, j) } else { 0.0 };
+                let after = (j + 1 < n).then(|| (in_i1, self.ends(x, j + 1).0));
+                better(old, out_i, self.ends(x, j).1, after)
+            };
+            let mut found = match near {
+                Some(near) => {
+                    let mut found = None;
+                    near.each_near(
+                        x,
+                        m,
+                        out_i,
+                        before,
+                        |x, c, budget| {
+                            let j = near.pos(x, c);
+                            if found.is_some() || j < i + 2 || self.get(&x.w, j).1 != c {
+                                return;
+                            }
+                            *budget = budget.saturating_sub(1);
+                            if try_j(x, j) {
+                                found = Some(j);
+                            }
+                        },
+                        budget,
+                    );
+                    found
+                }
+                None => (i + 2..n.min(i + 2 + window)).find(|&j| {
                     *budget = budget.saturating_sub(1);
-                    let out_j = self.ends(x, j).1;
-                    let old = before + if j + 1 < n { self.jump(&x.w, j) } else { 0.0 };
-                    // `length` is within 1e-6 of the true root: a first new
-                    // jump this long is no shorter than `old`, nor is `new`.
-                    if m.d2(out_i, out_j) * 0.999_99 >= old * old {
-                        continue;
+                    try_j(x, j)
+                }),
+            };
+            if let Some(j) = found {
+                self.reverse_measured(x, near, i + 1, j, budget);
+                any = true;
+                continue;
+            }
+            // With neighbours: the jump into step i + 1, replaced by one
+            // from an earlier step l's entry: reverse l ..= i. (In a window
+            // that move is the one above from step l - 1.)
+            let (Some(near), true) = (near, i > 0) else { continue };
+            let (e1, _) = self.get(&x.w, i + 1);
+            near.each_near(
+                x,
+                m,
+                x.point(e1),
+                before,
+                |x, c, budget| {
+                    let l = near.pos(x, c);
+                    if found.is_some() || l == 0 || l >= i || self.get(&x.w, l).0 != c {
+                        return;
                     }
-                    let after = if j + 1 < n { Some(self.ends(x, j + 1).0) } else { None };
-                    let new = m.d(out_i, out_j) + after.map_or(0.0, |a| m.d(in_i1, a));
-                    if new + 1e-3 < old {
-                        self.reverse(x, i + 1, j);
-                        self.measure(x, i);
-                        if j + 1 < n {
-                            self.measure(x, j);
-                        }
-                        improved = true;
-                        any = true;
-                        break;
+                    *budget = budget.saturating_sub(1);
+                    let old = self.jump(&x.w, l - 1) + before;
+                    let out_l1 = self.ends(x, l - 1).1;
+                    if better(old, out_l1, out_i, Some((x.point(c), x.point(e1)))) {
+                        found = Some(l);
                     }
-                }
-                if *budget == 0 {
-                    break;
-                }
+                },
+                budget,
+            );
+            if let Some(l) = found {
+                self.reverse_measured(x, Some(near), l, i, budget);
+                any = true;
             }
         }
         any
+    }
+
+    /// Reverse steps `a..=b` (costing the budget their count), measure the
+    /// two jumps at their ends again, and tell `near` where they are now.
+    fn reverse_measured(
+        &self,
+        x: &mut Index<'_, '_>,
+        near: Option<&Near>,
+        a: usize,
+        b: usize,
+        budget: &mut u64,
+    ) {
+        self.reverse(x, a, b);
+        *budget = budget.saturating_sub((b - a + 1) as u64);
+        if a > 0 {
+            self.measure(x, a - 1);
+        }
+        if b + 1 < self.len {
+            self.measure(x, b);
+        }
+        if let Some(near) = near {
+            near.place(x, self, a, b);
+        }
     }
 
     /// Reverse steps `a..=b`, each drawn the other way (entry and exit

@@ -40,34 +40,32 @@ fn seg(g: &mut Geometry<'_>, a: [f32; 3], b: [f32; 3]) {
 /// 2-opt as it was before the lengths were kept: every jump measured
 /// afresh, every candidate's two new jumps computed. The oracle of
 /// `two_opt_keeps_lengths_without_changing_a_move`.
-fn two_opt_afresh(tour: &Tour, x: &mut Index<'_, '_>, window: usize, budget: &mut u64) {
+fn two_opt_afresh(tour: &Tour, x: &mut Index<'_, '_>, window: usize, budget: &mut u64) -> bool {
     let n = tour.len;
     let length = |a: Packed, b: Packed| tour.metric.d(a, b);
-    let (mut improved, mut passes) = (true, 0);
-    while n >= 3 && improved && *budget > 0 && passes < 8 {
-        passes += 1;
-        improved = false;
-        for i in 0..n - 1 {
-            let out_i = tour.ends(x, i).1;
-            let in_i1 = tour.ends(x, i + 1).0;
-            let before = length(out_i, in_i1);
-            for j in i + 2..n.min(i + 2 + window) {
-                *budget = budget.saturating_sub(1);
-                let out_j = tour.ends(x, j).1;
-                let after = if j + 1 < n { Some(tour.ends(x, j + 1).0) } else { None };
-                let old = before + after.map_or(0.0, |a| length(out_j, a));
-                let new = length(out_i, out_j) + after.map_or(0.0, |a| length(in_i1, a));
-                if new + 1e-3 < old {
-                    tour.reverse(x, i + 1, j);
-                    improved = true;
-                    break;
-                }
-            }
-            if *budget == 0 {
+    let mut improved = false;
+    for i in 0..n.saturating_sub(1) {
+        if n < 3 || *budget == 0 {
+            break;
+        }
+        let out_i = tour.ends(x, i).1;
+        let in_i1 = tour.ends(x, i + 1).0;
+        let before = length(out_i, in_i1);
+        for j in i + 2..n.min(i + 2 + window) {
+            *budget = budget.saturating_sub(1);
+            let out_j = tour.ends(x, j).1;
+            let after = if j + 1 < n { Some(tour.ends(x, j + 1).0) } else { None };
+            let old = before + after.map_or(0.0, |a| length(out_j, a));
+            let new = length(out_i, out_j) + after.map_or(0.0, |a| length(in_i1, a));
+            if new + 1e-3 < old {
+                tour.reverse(x, i + 1, j);
+                *budget = budget.saturating_sub((j - i) as u64);
+                improved = true;
                 break;
             }
         }
     }
+    improved
 }
 
 /// Loop entries as they were chosen before the pruning: every vertex's
@@ -199,11 +197,17 @@ proptest::proptest! {
                     tour.push(&mut x, f, end);
                 }
                 let mut budget = 8 * WINDOW as u64 * tour.len as u64;
-                if afresh {
-                    tour.measure_all(&mut x);
-                    two_opt_afresh(&tour, &mut x, WINDOW, &mut budget)
-                } else {
-                    tour.two_opt(&mut x, WINDOW, &mut budget);
+                // Passes until one finds nothing, as the order pass runs it.
+                for _ in 0..8 {
+                    let moved = if afresh {
+                        tour.measure_all(&mut x);
+                        two_opt_afresh(&tour, &mut x, WINDOW, &mut budget)
+                    } else {
+                        tour.two_opt(&mut x, None, WINDOW, &mut budget)
+                    };
+                    if !moved || budget == 0 {
+                        break;
+                    }
                 }
                 tours.push((0..tour.len).map(|k| tour.get(&x.w, k)).collect::<Vec<_>>());
             }
@@ -460,7 +464,7 @@ proptest::proptest! {
                     tour.or_opt(&mut x, Some(&near), 0, &mut budget);
                     let l1 = tour_length(&tour, &x, start);
                     proptest::prop_assert!(l1 <= l0 * 1.000_01 + 1e-3, "or-opt: {l1} > {l0}");
-                    tour.two_opt_near(&mut x, &near, &mut budget);
+                    tour.two_opt(&mut x, Some(&near), 0, &mut budget);
                     let l2 = tour_length(&tour, &x, start);
                     proptest::prop_assert!(l2 <= l1 * 1.000_01 + 1e-3, "2-opt: {l2} > {l1}");
                 }
