@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 
 fn load_index(name: &str, index: usize) -> Loaded {
     let path = real_data(name);
-    formats::read(&path, &Options { index })
+    formats::read(&path, &Options { index, ..Options::default() })
         .unwrap_or_else(|e| panic!("{name}: {e:#}"))
         .unwrap_or_else(|| panic!("{name}: not a known format"))
 }
@@ -184,7 +184,8 @@ fn cube_n2o_homo_and_lumo_are_transposed_to_x_fastest() {
         );
         assert!(l.notes.iter().any(|n| n.contains("Bohr")));
     }
-    let e = formats::read(&real_data("N2O_homo+lumo.cube.gz"), &Options { index: 2 }).unwrap_err();
+    let e = formats::read(&real_data("N2O_homo+lumo.cube.gz"), &Options { index: 2, ..Options::default() })
+        .unwrap_err();
     assert!(format!("{e:#}").contains("2 value(s) per point; value 2 was asked for"), "{e:#}");
 }
 
@@ -249,7 +250,8 @@ fn nifti_4d_gives_each_time_point() {
         );
     }
     assert_eq!(summary(&load("example4d.nii.gz").volume).argmax, (64, 49, 0));
-    let e = formats::read(&real_data("example4d.nii.gz"), &Options { index: 2 }).unwrap_err();
+    let e = formats::read(&real_data("example4d.nii.gz"), &Options { index: 2, ..Options::default() })
+        .unwrap_err();
     assert!(format!("{e:#}").contains("holds 2 volume(s) of 128x96x24; volume 2 was asked for"), "{e:#}");
 }
 

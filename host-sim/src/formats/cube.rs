@@ -201,7 +201,7 @@ mod tests {
     fn orbitals_are_picked_by_index() {
         let text = cube([3, 2, 5], &[11, 12], value);
         for (index, sign) in [(0, 1.0), (1, -1.0)] {
-            let l = parse(text.as_bytes(), &Options { index }).unwrap();
+            let l = parse(text.as_bytes(), &Options { index, ..Options::default() }).unwrap();
             let Samples::F32(v) = &l.volume.samples else { panic!() };
             assert_eq!(v[1 + 3 * (1 + 2 * 4)], sign * 114.0);
             let orbital = ["11", "12"][index];
@@ -211,7 +211,8 @@ mod tests {
                 l.notes
             );
         }
-        let e = format!("{:#}", parse(text.as_bytes(), &Options { index: 2 }).unwrap_err());
+        let e =
+            format!("{:#}", parse(text.as_bytes(), &Options { index: 2, ..Options::default() }).unwrap_err());
         assert!(e.contains("holds 2 value(s) per point; value 2 was asked for"), "{e}");
     }
 
@@ -234,7 +235,7 @@ mod tests {
             "",
             1,
         );
-        let l = parse(text.as_bytes(), &Options { index: 1 }).unwrap();
+        let l = parse(text.as_bytes(), &Options { index: 1, ..Options::default() }).unwrap();
         let Samples::F32(v) = &l.volume.samples else { panic!() };
         assert_eq!(v[7], -111.0);
         assert!(l.notes.iter().any(|n| n.contains("2 values; loaded value 1")), "{:?}", l.notes);

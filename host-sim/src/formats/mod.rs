@@ -94,13 +94,29 @@ impl Format {
     }
 }
 
-/// Which volume to take from a file that holds several.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash)]
+/// Default of [`Options::max_bytes`]: 2 GiB.
+pub const DEFAULT_MAX_BYTES: usize = 2 << 30;
+
+/// Which volume to take from a file that holds several, and how large a
+/// volume may be.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct Options {
     /// Index from 0 of the volume to load: a NIfTI's time point (the 4th
     /// dimension and on, flattened), a cube's orbital (or value per point),
     /// a VTK file's point scalar array (in file order). Default: the first.
     pub index: usize,
+    /// The most bytes a volume's samples may take, in the file's sample
+    /// type or as loaded, whichever is more: a header asking for more is
+    /// refused before anything is allocated or read for the samples
+    /// (`check_size`). Default [`DEFAULT_MAX_BYTES`], 2 GiB; the command
+    /// line's `--max-volume-mb` sets it.
+    pub max_bytes: usize,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options { index: 0, max_bytes: DEFAULT_MAX_BYTES }
+    }
 }
 
 /// A volume read from a file, and what the reader has to say about it.
@@ -138,28 +154,269 @@ pub fn read_as(path: &Path, format: Format, opts: &Options) -> Result<Loaded> {
     .with_context(|| format!("cannot load {} as {}", path.display(), format.name()))
 }
 
-/// The format the first KiB of the file (gunzipped if need be) shows.
-fn sniff_file(path: &Path) -> Option<Format> {
-    let mut head = Vec::with_capacity(1024);
-    let f = std::fs::File::open(path).ok()?;
-    f.take(1024).read_to_end(&mut head).ok()?;
-    if is_gzip(&head) {
-        let f = std::fs::File::open(path).ok()?;
-        let mut inner = Vec::with_capacity(1024);
-        // A read error (a short or corrupt stream) still leaves what inflated.
-        let _ =
-            flate2::read::MultiGzDecoder::new(std::io::BufReader::new(f)).take(1024).read_to_end(&mut inner);
-        head = inner;
-    }
-    Format::sniff(&head)
-}
-
 /// Check that `opts` asks for the one volume of a single-volume format.
 pub(crate) fn single_volume(opts: &Options) -> Result<()> {
     if opts.index > 0 {
         bail!("the file holds one volume; volume {} was asked for", opts.index);
     }
     Ok(())
+}
+
+/// Check, from a header's extents `dims` and sample type, that the samples
+/// fit within `max_bytes` ([`Options::max_bytes`]) in the file's type and
+/// as loaded; their bytes in the file's type. Call it before allocating or
+/// reading anything for them.
+pub(crate) fn check_size(dims: &[usize], elem: Elem, max_bytes: usize) -> Result<usize> {
+    let stored = byte_len(dims, elem)?;
+    let count = dims.iter().try_fold(1usize, |a, &d| a.checked_mul(d));
+    let loaded = count.and_then(|c| c.checked_mul(elem.loads_as().size()));
+    let need = loaded.with_context(|| format!("the extents {dims:?} overflow"))?.max(stored);
+    if need > max_bytes {
+        let shape = dims.iter().map(ToString::to_string).collect::<Vec<_>>().join("x");
+        bail!(
+            "the volume's {shape} {} samples take {}, more than the limit of {} (--max-volume-mb raises it)",
+            elem.name(),
+            amount(need, false),
+            amount(max_bytes, true)
+        );
+    }
+    Ok(stored)
+}
+
+/// Bytes for messages: `2752512 bytes (2.6 MiB)`, `24 bytes`, or (if
+/// `whole` and they are) `2048 MiB`.
+fn amount(bytes: usize, whole: bool) -> String {
+    const MIB: usize = 1 << 20;
+    match (bytes / MIB, bytes % MIB) {
+        (m, 0) if whole && m > 0 => format!("{m} MiB"),
+        (0, _) => format!("{bytes} bytes"),
+        (m, 0) => format!("{bytes} bytes ({m} MiB)"),
+        _ => format!("{bytes} bytes ({:.1} MiB)", bytes as f64 / MIB as f64),
+    }
+}
+
+/// Bytes the input buffers.
+const BUFFER: usize = 64 << 10;
+
+/// A volume file, or a part of one, as a stream of bytes that a reader
+/// takes in order, never more than it asks for: a header's first bytes
+/// ([`Input::head`]), then the data the header declares ([`Input::data`]:
+/// exactly that many bytes, and whether more follow). Nothing is read
+/// ahead beyond a small buffer, so a file is never held whole before its
+/// header has said what it holds, and a stream without end (`/dev/zero`, a
+/// FIFO) stops where the header's sizes do. A gzip file is inflated as it
+/// is read.
+pub(crate) struct Input<'a> {
+    src: Box<dyn Read + 'a>,
+    /// Bytes read from `src` are `buf[..end]`, those before `at` taken
+    /// already.
+    buf: Box<[u8]>,
+    at: usize,
+    end: usize,
+    /// Bytes taken so far.
+    pos: u64,
+    /// Whether `src` inflates gzip (for error messages).
+    gzip: bool,
+    /// Bytes in all, when known (a regular file, a slice; not gzip).
+    size: Option<u64>,
+}
+
+impl<'a> Input<'a> {
+    fn new(src: Box<dyn Read + 'a>, gzip: bool, size: Option<u64>) -> Self {
+        Input { src, buf: vec![0; BUFFER].into_boxed_slice(), at: 0, end: 0, pos: 0, gzip, size }
+    }
+
+    /// Open `path`, inflating it as it is read if it starts like gzip.
+    pub(crate) fn open(path: &Path) -> Result<Input<'static>> {
+        Self::open_as(path, true)
+    }
+
+    /// Open `path` as it is (a raw file whose first bytes happen to look
+    /// like gzip is still raw).
+    pub(crate) fn open_plain(path: &Path) -> Result<Input<'static>> {
+        Self::open_as(path, false)
+    }
+
+    fn open_as(path: &Path, gunzip: bool) -> Result<Input<'static>> {
+        let cannot = || format!("cannot read {}", path.display());
+        let file = std::fs::File::open(path).with_context(cannot)?;
+        let size = file.metadata().ok().filter(|m| m.is_file()).map(|m| m.len());
+        let mut r = std::io::BufReader::new(file);
+        if gunzip && is_gzip(std::io::BufRead::fill_buf(&mut r).with_context(cannot)?) {
+            return Ok(Input::new(Box::new(flate2::bufread::MultiGzDecoder::new(r)), true, None));
+        }
+        Ok(Input::new(Box::new(r), false, size))
+    }
+
+    /// Bytes in memory, taken as they are.
+    pub(crate) fn from_slice(bytes: &'a [u8]) -> Self {
+        Input::new(Box::new(bytes), false, Some(bytes.len() as u64))
+    }
+
+    /// Bytes left, when the stream's length is known (an uncompressed
+    /// regular file, a slice).
+    pub(crate) fn remaining(&self) -> Option<u64> {
+        self.size.map(|s| s.saturating_sub(self.pos))
+    }
+
+    fn read_error(&self, e: std::io::Error) -> anyhow::Error {
+        if self.gzip {
+            anyhow::anyhow!("cannot gunzip: the gzip data are corrupt or cut short ({e})")
+        } else {
+            anyhow::anyhow!("read error ({e})")
+        }
+    }
+
+    /// Buffered bytes not yet taken.
+    fn avail(&self) -> &[u8] {
+        self.buf.get(self.at..self.end).unwrap_or_default()
+    }
+
+    /// Read more into the buffer; `false` at the end of the stream.
+    fn fill(&mut self) -> Result<bool> {
+        if self.at > 0 {
+            self.buf.copy_within(self.at..self.end, 0);
+            self.end -= self.at;
+            self.at = 0;
+        }
+        if self.end >= self.buf.len() {
+            return Ok(true);
+        }
+        loop {
+            match self.src.read(self.buf.get_mut(self.end..).unwrap_or_default()) {
+                Ok(n) => {
+                    self.end += n;
+                    return Ok(n > 0);
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(self.read_error(e)),
+            }
+        }
+    }
+
+    fn consume(&mut self, n: usize) {
+        let n = n.min(self.avail().len());
+        self.at += n;
+        self.pos += n as u64;
+    }
+
+    /// The next bytes without taking them: `n` of them (at most 64 KiB),
+    /// fewer only at the end of the stream.
+    pub(crate) fn peek(&mut self, n: usize) -> Result<&[u8]> {
+        let n = n.min(BUFFER);
+        while self.avail().len() < n && self.fill()? {}
+        Ok(self.avail().get(..n).unwrap_or(self.avail()))
+    }
+
+    /// Take up to `n` bytes: fewer only at the end of the stream. Memory
+    /// grows with the bytes that come, not with `n`.
+    pub(crate) fn head(&mut self, n: usize) -> Result<Vec<u8>> {
+        let mut out: Vec<u8> = Vec::new();
+        while out.len() < n {
+            if self.avail().is_empty() && !self.fill()? {
+                break;
+            }
+            let k = self.avail().len().min(n - out.len());
+            if out.capacity() - out.len() < k {
+                // Double, but never past `n`.
+                let more = (n - out.len()).min(out.capacity().max(BUFFER));
+                out.try_reserve_exact(more)
+                    .map_err(|e| anyhow::anyhow!("cannot allocate {n} bytes ({e})"))?;
+            }
+            out.extend_from_slice(self.avail().get(..k).unwrap_or_default());
+            self.consume(k);
+        }
+        Ok(out)
+    }
+
+    /// Pass over up to `n` bytes without keeping them; how many there were.
+    fn skip(&mut self, n: u64) -> Result<u64> {
+        let mut done = 0;
+        while done < n {
+            if self.avail().is_empty() && !self.fill()? {
+                break;
+            }
+            let k = self.avail().len().min(usize::try_from(n - done).unwrap_or(usize::MAX));
+            self.consume(k);
+            done += k as u64;
+        }
+        Ok(done)
+    }
+
+    /// The data the header declares: exactly `len` bytes from here.
+    pub(crate) fn data(&mut self, len: usize) -> Data<'_, 'a> {
+        let start = self.pos;
+        Data { input: self, start, len: len as u64 }
+    }
+}
+
+/// The data a header declares, [`Input::data`]: parts taken or passed over
+/// in order, then [`Data::finish`] checks that no more follow.
+pub(crate) struct Data<'i, 'a> {
+    input: &'i mut Input<'a>,
+    start: u64,
+    len: u64,
+}
+
+impl Data<'_, '_> {
+    /// Bytes of the data taken or passed over so far.
+    fn done(&self) -> u64 {
+        self.input.pos - self.start
+    }
+
+    fn short(&self) -> anyhow::Error {
+        anyhow::anyhow!("the data stop after {} of {} bytes (truncated?)", self.done(), self.len)
+    }
+
+    fn room(&self, n: u64) -> Result<()> {
+        if n > self.len.saturating_sub(self.done()) {
+            bail!("internal: {n} bytes asked for past the {} bytes of data", self.len);
+        }
+        Ok(())
+    }
+
+    /// Take the next `n` bytes of the data.
+    pub(crate) fn take(&mut self, n: usize) -> Result<Vec<u8>> {
+        self.room(n as u64)?;
+        let v = self.input.head(n)?;
+        if v.len() < n {
+            return Err(self.short());
+        }
+        Ok(v)
+    }
+
+    /// Pass over the next `n` bytes of the data.
+    pub(crate) fn skip(&mut self, n: u64) -> Result<()> {
+        self.room(n)?;
+        if self.input.skip(n)? < n {
+            return Err(self.short());
+        }
+        Ok(())
+    }
+
+    /// Pass over what is left of the data, and check that nothing follows.
+    pub(crate) fn finish(&mut self) -> Result<()> {
+        self.skip(self.len.saturating_sub(self.done()))?;
+        if !self.input.peek(1)?.is_empty() {
+            bail!(
+                "{} bytes of data expected, {} follow",
+                self.len,
+                match self.input.remaining() {
+                    Some(k) => format!("and {k} more"),
+                    None => "more".to_string(),
+                }
+            );
+        }
+        Ok(())
+    }
+}
+
+/// The format the first KiB of the file (gunzipped if need be) shows.
+fn sniff_file(path: &Path) -> Option<Format> {
+    let mut input = Input::open(path).ok()?;
+    // A read error (a short or corrupt stream) still leaves what came.
+    let _ = input.peek(1024);
+    Format::sniff(input.avail())
 }
 
 /// Read a whole file, naming it if that fails.
@@ -283,6 +540,26 @@ impl Elem {
     }
 }
 
+impl From<Dtype> for Elem {
+    fn from(d: Dtype) -> Elem {
+        match d {
+            Dtype::U8 => Elem::U8,
+            Dtype::U16 => Elem::U16,
+            Dtype::I16 => Elem::I16,
+            Dtype::F32 => Elem::F32,
+        }
+    }
+}
+
+impl From<crate::volume::Endian> for Endian {
+    fn from(e: crate::volume::Endian) -> Endian {
+        match e {
+            crate::volume::Endian::Little => Endian::Little,
+            crate::volume::Endian::Big => Endian::Big,
+        }
+    }
+}
+
 /// Bytes of `dims` samples of `elem`, or an error if that overflows.
 pub(crate) fn byte_len(dims: &[usize], elem: Elem) -> Result<usize> {
     dims.iter()
@@ -291,8 +568,9 @@ pub(crate) fn byte_len(dims: &[usize], elem: Elem) -> Result<usize> {
 }
 
 /// Decode binary samples; `bytes.len()` is a multiple of `elem.size()`
-/// (anything past the last whole sample is ignored).
-pub(crate) fn decode(bytes: &[u8], elem: Elem, endian: Endian) -> Samples {
+/// (anything past the last whole sample is ignored). `u8` samples keep
+/// the bytes' memory.
+pub(crate) fn decode(bytes: Vec<u8>, elem: Elem, endian: Endian) -> Samples {
     fn words<const N: usize, T>(
         bytes: &[u8],
         endian: Endian,
@@ -302,47 +580,30 @@ pub(crate) fn decode(bytes: &[u8], elem: Elem, endian: Endian) -> Samples {
         let f = if endian == Endian::Little { le } else { be };
         bytes.chunks_exact(N).map(|c| f(c.try_into().unwrap_or([0; N]))).collect()
     }
+    let b = &bytes[..];
     match elem {
-        Elem::U8 => Samples::U8(bytes.to_vec()),
-        Elem::I8 => Samples::I16(bytes.iter().map(|&b| i16::from(b as i8)).collect()),
-        Elem::I16 => Samples::I16(words(bytes, endian, i16::from_le_bytes, i16::from_be_bytes)),
-        Elem::U16 => Samples::U16(words(bytes, endian, u16::from_le_bytes, u16::from_be_bytes)),
+        Elem::U8 => Samples::U8(bytes),
+        Elem::I8 => Samples::I16(b.iter().map(|&b| i16::from(b as i8)).collect()),
+        Elem::I16 => Samples::I16(words(b, endian, i16::from_le_bytes, i16::from_be_bytes)),
+        Elem::U16 => Samples::U16(words(b, endian, u16::from_le_bytes, u16::from_be_bytes)),
         Elem::F16 => Samples::F32(
-            words(bytes, endian, u16::from_le_bytes, u16::from_be_bytes)
-                .into_iter()
-                .map(f16_to_f32)
-                .collect(),
+            words(b, endian, u16::from_le_bytes, u16::from_be_bytes).into_iter().map(f16_to_f32).collect(),
         ),
-        Elem::F32 => Samples::F32(words(bytes, endian, f32::from_le_bytes, f32::from_be_bytes)),
+        Elem::F32 => Samples::F32(words(b, endian, f32::from_le_bytes, f32::from_be_bytes)),
         Elem::I32 => Samples::F32(
-            words(bytes, endian, i32::from_le_bytes, i32::from_be_bytes)
-                .into_iter()
-                .map(|v| v as f32)
-                .collect(),
+            words(b, endian, i32::from_le_bytes, i32::from_be_bytes).into_iter().map(|v| v as f32).collect(),
         ),
         Elem::U32 => Samples::F32(
-            words(bytes, endian, u32::from_le_bytes, u32::from_be_bytes)
-                .into_iter()
-                .map(|v| v as f32)
-                .collect(),
+            words(b, endian, u32::from_le_bytes, u32::from_be_bytes).into_iter().map(|v| v as f32).collect(),
         ),
         Elem::I64 => Samples::F32(
-            words(bytes, endian, i64::from_le_bytes, i64::from_be_bytes)
-                .into_iter()
-                .map(|v| v as f32)
-                .collect(),
+            words(b, endian, i64::from_le_bytes, i64::from_be_bytes).into_iter().map(|v| v as f32).collect(),
         ),
         Elem::U64 => Samples::F32(
-            words(bytes, endian, u64::from_le_bytes, u64::from_be_bytes)
-                .into_iter()
-                .map(|v| v as f32)
-                .collect(),
+            words(b, endian, u64::from_le_bytes, u64::from_be_bytes).into_iter().map(|v| v as f32).collect(),
         ),
         Elem::F64 => Samples::F32(
-            words(bytes, endian, f64::from_le_bytes, f64::from_be_bytes)
-                .into_iter()
-                .map(|v| v as f32)
-                .collect(),
+            words(b, endian, f64::from_le_bytes, f64::from_be_bytes).into_iter().map(|v| v as f32).collect(),
         ),
     }
 }
@@ -534,17 +795,23 @@ mod tests {
 
     #[test]
     fn decode_every_type_both_orders() {
-        let le = |v: &[u8]| decode(v, Elem::I16, Endian::Little);
+        let le = |v: &[u8]| decode(v.to_vec(), Elem::I16, Endian::Little);
         assert_eq!(le(&[0x34, 0x12, 0xff, 0xff]), Samples::I16(vec![0x1234, -1]));
-        assert_eq!(decode(&[0x12, 0x34], Elem::U16, Endian::Big), Samples::U16(vec![0x1234]));
-        assert_eq!(decode(&[0x80, 0x7f], Elem::I8, Endian::Big), Samples::I16(vec![-128, 127]));
-        assert_eq!(decode(&1.5f32.to_be_bytes(), Elem::F32, Endian::Big), Samples::F32(vec![1.5]));
-        assert_eq!(decode(&(-7i32).to_le_bytes(), Elem::I32, Endian::Little), Samples::F32(vec![-7.0]));
-        assert_eq!(decode(&u32::MAX.to_be_bytes(), Elem::U32, Endian::Big), Samples::F32(vec![4294967296.0]));
-        assert_eq!(decode(&(-3i64).to_be_bytes(), Elem::I64, Endian::Big), Samples::F32(vec![-3.0]));
-        assert_eq!(decode(&9u64.to_le_bytes(), Elem::U64, Endian::Little), Samples::F32(vec![9.0]));
-        assert_eq!(decode(&0.1f64.to_be_bytes(), Elem::F64, Endian::Big), Samples::F32(vec![0.1]));
-        assert_eq!(decode(&[0x3c, 0x00], Elem::F16, Endian::Big), Samples::F32(vec![1.0]));
+        assert_eq!(decode([0x12, 0x34].to_vec(), Elem::U16, Endian::Big), Samples::U16(vec![0x1234]));
+        assert_eq!(decode([0x80, 0x7f].to_vec(), Elem::I8, Endian::Big), Samples::I16(vec![-128, 127]));
+        assert_eq!(decode(1.5f32.to_be_bytes().to_vec(), Elem::F32, Endian::Big), Samples::F32(vec![1.5]));
+        assert_eq!(
+            decode((-7i32).to_le_bytes().to_vec(), Elem::I32, Endian::Little),
+            Samples::F32(vec![-7.0])
+        );
+        assert_eq!(
+            decode(u32::MAX.to_be_bytes().to_vec(), Elem::U32, Endian::Big),
+            Samples::F32(vec![4294967296.0])
+        );
+        assert_eq!(decode((-3i64).to_be_bytes().to_vec(), Elem::I64, Endian::Big), Samples::F32(vec![-3.0]));
+        assert_eq!(decode(9u64.to_le_bytes().to_vec(), Elem::U64, Endian::Little), Samples::F32(vec![9.0]));
+        assert_eq!(decode(0.1f64.to_be_bytes().to_vec(), Elem::F64, Endian::Big), Samples::F32(vec![0.1]));
+        assert_eq!(decode([0x3c, 0x00].to_vec(), Elem::F16, Endian::Big), Samples::F32(vec![1.0]));
     }
 
     #[test]
@@ -619,5 +886,89 @@ mod tests {
         let mut bad = gz.clone();
         bad[12] ^= 0xff;
         assert!(gunzip(&bad, usize::MAX).is_err());
+    }
+
+    fn error<T: std::fmt::Debug>(r: Result<T>) -> String {
+        format!("{:#}", r.unwrap_err())
+    }
+
+    #[test]
+    fn input_takes_exactly_the_data_declared() {
+        let mut input = Input::from_slice(b"headDATAmore");
+        assert_eq!(input.peek(2).unwrap(), b"he");
+        assert_eq!(input.head(4).unwrap(), b"head");
+        let mut data = input.data(4);
+        assert_eq!(data.take(4).unwrap(), b"DATA");
+        assert_eq!(error(data.finish()), "4 bytes of data expected, and 4 more follow");
+        let mut input = Input::from_slice(b"abc");
+        let mut data = input.data(5);
+        data.skip(1).unwrap();
+        assert_eq!(error(data.take(4)), "the data stop after 3 of 5 bytes (truncated?)");
+        let mut input = Input::from_slice(b"abcd");
+        let mut data = input.data(3);
+        assert!(error(data.take(4)).contains("internal"));
+        data.skip(1).unwrap();
+        assert_eq!(data.take(2).unwrap(), b"bc");
+        assert!(error(data.finish()).contains("and 1 more follow"));
+        // A head asks for at most: fewer at the end.
+        let mut input = Input::from_slice(b"ab");
+        assert_eq!(input.head(1 << 40).unwrap(), b"ab");
+        assert_eq!(input.head(8).unwrap(), b"");
+        assert_eq!(input.data(0).finish().unwrap(), ());
+    }
+
+    #[test]
+    fn input_inflates_gzip_as_it_reads_and_stops_at_the_data() {
+        use std::io::Write;
+        let dir = std::env::temp_dir().join(format!("isoscope-input-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut z = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+        z.write_all(&[5u8; 1 << 20]).unwrap();
+        let gz = z.finish().unwrap();
+        let path = dir.join("a.gz");
+        std::fs::write(&path, &gz).unwrap();
+        let mut input = Input::open(&path).unwrap();
+        let mut data = input.data(10);
+        assert_eq!(data.take(10).unwrap(), [5; 10]);
+        // The stream's length is not known: it says only that more follow.
+        assert_eq!(error(data.finish()), "10 bytes of data expected, more follow");
+        // Not inflated when opened as it is.
+        assert_eq!(Input::open_plain(&path).unwrap().head(2).unwrap(), [0x1f, 0x8b]);
+        assert_eq!(Input::open_plain(&path).unwrap().remaining(), Some(gz.len() as u64));
+        // Cut short, or corrupt: the gzip error.
+        std::fs::write(&path, &gz[..gz.len() / 2]).unwrap();
+        let e = error(Input::open(&path).unwrap().data(1 << 20).take(1 << 20));
+        assert!(e.contains("cannot gunzip: the gzip data are corrupt or cut short"), "{e}");
+        let mut bad = gz.clone();
+        let n = bad.len();
+        bad[n - 6] ^= 0x55; // the CRC: found when the end is checked
+        std::fs::write(&path, &bad).unwrap();
+        let mut input = Input::open(&path).unwrap();
+        let mut data = input.data(1 << 20);
+        data.take(1 << 20).unwrap();
+        assert!(error(data.finish()).contains("corrupt"));
+        assert!(error(Input::open(&dir.join("missing")).map(|_| ())).contains("cannot read"));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn the_limit_counts_the_larger_of_the_file_and_loaded_types() {
+        const GIB: usize = 1 << 30;
+        assert_eq!(check_size(&[1024, 1024, 1024], Elem::U8, GIB).unwrap(), GIB);
+        // int8 loads as i16: twice its bytes.
+        assert_eq!(check_size(&[512, 1024, 1024], Elem::I8, GIB).unwrap(), GIB / 2);
+        let e = error(check_size(&[1024, 1024, 1024], Elem::I8, GIB));
+        assert_eq!(
+            e,
+            "the volume's 1024x1024x1024 int8 samples take 2147483648 bytes (2048 MiB), more than the limit \
+             of 1024 MiB (--max-volume-mb raises it)"
+        );
+        // float64 loads as f32: its own bytes.
+        assert!(
+            error(check_size(&[256, 1024, 1024], Elem::F64, GIB * 2 - 1))
+                .contains("limit of 2147483647 bytes (2048.0 MiB)")
+        );
+        assert!(error(check_size(&[usize::MAX, 2, 1], Elem::U8, GIB)).contains("overflow"));
+        assert_eq!(Options::default().max_bytes, 2 * GIB);
     }
 }

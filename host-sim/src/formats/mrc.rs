@@ -139,7 +139,7 @@ pub fn parse(bytes: &[u8], opts: &Options) -> Result<Loaded> {
             if have < need { " (truncated?)" } else { " (extents that do not match the file size)" }
         );
     }
-    let (samples, dims) = permute(decode(&bytes[offset..], elem, e), n, axis);
+    let (samples, dims) = permute(decode(bytes[offset..].to_vec(), elem, e), n, axis);
     let m = [w(7), w(8), w(9)];
     let spacing = [0, 1, 2].map(|i| {
         let cell = f64::from(real(bytes, 10 + i, e));
@@ -284,7 +284,7 @@ mod tests {
     fn bad_files_are_clear_errors() {
         let good = file([2, 2, 2], 2, [2; 3], [2.0; 3], [1, 2, 3], &[0; 80], 0x44, false, &[0; 32]);
         assert!(parse(&good, &Options::default()).is_ok());
-        let e = format!("{:#}", parse(&good, &Options { index: 1 }).unwrap_err());
+        let e = format!("{:#}", parse(&good, &Options { index: 1, ..Options::default() }).unwrap_err());
         assert!(e.contains("holds one volume; volume 1 was asked for"), "{e}");
         assert!(err(&good[..500]).contains("truncated: an MRC/CCP4 header is 1024 bytes, the file has 500"));
         let e = err(&good[..good.len() - 3]);

@@ -188,7 +188,7 @@ fn volume(h: &NiftiHeader, bytes: &[u8], offset: usize, opts: &Options) -> Resul
     let one = byte_len(&[nx, ny, nz], elem)?;
     let start = offset + opts.index * one;
     let endian = if h.endianness == nifti::Endianness::Little { Endian::Little } else { Endian::Big };
-    let mut samples = decode(&bytes[start..start + one], elem, endian);
+    let mut samples = decode(bytes[start..start + one].to_vec(), elem, endian);
     let mut notes: Vec<String> = elem.note().into_iter().collect();
     if frames > 1 {
         notes.push(format!("the file holds {frames} volumes ({shape}); loaded volume {}", opts.index));
@@ -308,9 +308,9 @@ pub(crate) mod tests {
         let l = parse(&f, &Options::default()).unwrap();
         assert_eq!(l.volume.samples, Samples::I16(vec![1, 2]));
         assert!(l.notes.iter().any(|n| n.contains("3 volumes")), "{:?}", l.notes);
-        let l = parse(&f, &Options { index: 2 }).unwrap();
+        let l = parse(&f, &Options { index: 2, ..Options::default() }).unwrap();
         assert_eq!(l.volume.samples, Samples::I16(vec![5, 6]));
-        let e = format!("{:#}", parse(&f, &Options { index: 3 }).unwrap_err());
+        let e = format!("{:#}", parse(&f, &Options { index: 3, ..Options::default() }).unwrap_err());
         assert!(e.contains("holds 3 volume(s) of 2x1x1; volume 3 was asked for"), "{e}");
     }
 

@@ -255,7 +255,7 @@ pub fn parse(bytes: &[u8], dir: Option<&Path>, opts: &Options) -> Result<Loaded>
         bail!("`byte skip: {byte_skip}`: only -1 (data at the end) or a count is allowed");
     }
     let samples = match encoding.as_str() {
-        "raw" => decode(&data[window(data, byte_skip == -1)?], elem, endian),
+        "raw" => decode(data[window(data, byte_skip == -1)?].to_vec(), elem, endian),
         "gzip" | "gz" => {
             if byte_skip == -1 {
                 bail!("`byte skip: -1` is only allowed with raw encoding");
@@ -263,7 +263,7 @@ pub fn parse(bytes: &[u8], dir: Option<&Path>, opts: &Options) -> Result<Loaded>
             let limit =
                 need.checked_add(byte_skip as usize).and_then(|v| v.checked_add(1)).unwrap_or(usize::MAX);
             let inflated = gunzip(data, limit).context("cannot inflate the gzip-encoded data")?;
-            decode(&inflated[window(&inflated, false)?], elem, endian)
+            decode(inflated[window(&inflated, false)?].to_vec(), elem, endian)
         }
         "ascii" | "text" | "txt" => {
             let count = n[0] * n[1] * n[2];
@@ -496,7 +496,7 @@ mod tests {
                 .contains("not a vector")
         );
         assert!(err(&nrrd(&format!("{U8}data file: LIST\n"), &data)).contains("several files"));
-        let e = format!("{:#}", parse(&good, None, &Options { index: 1 }).unwrap_err());
+        let e = format!("{:#}", parse(&good, None, &Options { index: 1, ..Options::default() }).unwrap_err());
         assert!(e.contains("holds one volume; volume 1 was asked for"), "{e}");
         assert!(
             err(&nrrd("type: float\ndimension: 1\nsizes: 3\nencoding: ascii\n", b"1 2"))

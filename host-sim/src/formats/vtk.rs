@@ -215,7 +215,7 @@ impl<'a> Reader<'a> {
     fn values(&mut self, count: usize, elem: Elem, what: &str) -> Result<Samples> {
         if self.binary {
             let n = count.checked_mul(elem.size()).context("the extents overflow")?;
-            Ok(decode(self.binary_bytes(n, what)?, elem, Endian::Big))
+            Ok(decode(self.binary_bytes(n, what)?.to_vec(), elem, Endian::Big))
         } else {
             let mut tokens = std::iter::from_fn(|| self.c.token());
             parse_text(&mut tokens, count, elem, what)
@@ -513,11 +513,14 @@ ignored 2 1 int
         assert_eq!(l.volume.samples, Samples::I16(vec![0, 1, 2, 10, 11, 12, 100, 101, 102, 110, 111, -112]));
         assert_eq!(l.notes, ["loaded point data `density`"]);
         // The second one-component point array is the FIELD's `extra`.
-        let l = parse(ASCII.as_bytes(), &Options { index: 1 }).unwrap();
+        let l = parse(ASCII.as_bytes(), &Options { index: 1, ..Options::default() }).unwrap();
         let Samples::F32(v) = &l.volume.samples else { panic!() };
         assert_eq!(v[11], 0.5);
         assert!(l.notes[0].contains("float64"));
-        let e = format!("{:#}", parse(ASCII.as_bytes(), &Options { index: 2 }).unwrap_err());
+        let e = format!(
+            "{:#}",
+            parse(ASCII.as_bytes(), &Options { index: 2, ..Options::default() }).unwrap_err()
+        );
         assert!(e.contains("holds 2 one-component POINT_DATA array(s) (density, extra); array 2"), "{e}");
     }
 
