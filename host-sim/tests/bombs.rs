@@ -1,13 +1,17 @@
-//! Size bombs and streams without end: the raw reader takes exactly the
-//! bytes `--dims` and `--dtype` declare, so a data file that is
-//! `/dev/zero` fails at once with a plain error, and a volume larger than
-//! `--max-volume-mb` is refused before anything is read.
+//! Decompression and size bombs, and streams without end: the raw, NIfTI
+//! and MRC readers take the header, then exactly the bytes it declares
+//! (inflating gzip as they read), so a small file that inflates to
+//! gigabytes, a header asking for more than `--max-volume-mb`, or a data
+//! file that is `/dev/zero` fails at once with a plain error.
 //!
 //! The binary runs under `ulimit -v` (address space, [`MEMORY_KB`]): a
 //! reader that held a whole inflated stream, or read `/dev/zero` to its
 //! end, could not allocate, and would not give the error these tests ask
 //! for. Each must also answer within [`SECONDS`].
 
+use flate2::Compression;
+use flate2::write::GzEncoder;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
@@ -59,12 +63,130 @@ fn loaded(args: &[&str]) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
+/// A scratch folder, removed when dropped.
+struct Scratch(PathBuf);
+
+impl Scratch {
+    fn new(name: &str) -> Self {
+        let d = std::env::temp_dir().join(format!("isoscope-bombs-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        Scratch(d)
+    }
+
+    fn path(&self, name: &str) -> PathBuf {
+        self.0.join(name)
+    }
+
+    /// Write `bytes` as `name`; its path as a string.
+    fn file(&self, name: &str, bytes: &[u8]) -> String {
+        let p = self.path(name);
+        std::fs::write(&p, bytes).unwrap();
+        p.to_str().unwrap().to_owned()
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn gzip(bytes: &[u8]) -> Vec<u8> {
+    let mut z = GzEncoder::new(Vec::new(), Compression::best());
+    z.write_all(bytes).unwrap();
+    z.finish().unwrap()
+}
+
+/// Bytes of zeros a bomb inflates to: 2 GiB.
+const BOMB: usize = 2 << 30;
+
+/// A gzip file of `head`, then 2 GiB of zeros (about 2 MB): gzip members
+/// of 8 MiB of zeros one after another, as gzip allows.
+fn bomb(head: &[u8]) -> Vec<u8> {
+    const MEMBER: usize = 8 << 20;
+    let zeros = gzip(&vec![0u8; MEMBER]);
+    let mut f = gzip(head);
+    for _ in 0..BOMB / MEMBER {
+        f.extend_from_slice(&zeros);
+    }
+    assert!(f.len() < 4 << 20, "{} bytes", f.len());
+    f
+}
+
+/// A NIfTI-1 header (352 bytes with the extension flag): `dims` of
+/// `datatype`/`bitpix`, little-endian, data at byte 352; `magic` n+1 or
+/// ni1 (a .hdr, data at byte 0 of its .img).
+fn nifti(dims: &[i16], datatype: i16, bitpix: i16, magic: &[u8; 4]) -> Vec<u8> {
+    let mut h = vec![0u8; 352];
+    let mut put = |at: usize, b: &[u8]| h[at..at + b.len()].copy_from_slice(b);
+    put(0, &348i32.to_le_bytes());
+    put(40, &(dims.len() as i16).to_le_bytes());
+    for (i, d) in dims.iter().enumerate() {
+        put(42 + 2 * i, &d.to_le_bytes());
+    }
+    put(70, &datatype.to_le_bytes());
+    put(72, &bitpix.to_le_bytes());
+    for i in 0..4 {
+        put(76 + 4 * i, &1f32.to_le_bytes());
+    }
+    let offset: f32 = if magic == b"ni1\0" { 0.0 } else { 352.0 };
+    put(108, &offset.to_le_bytes());
+    put(344, magic);
+    h
+}
+
+/// An MRC header (mode 0, int8): `n` columns, rows, sections.
+fn mrc(n: [i32; 3]) -> Vec<u8> {
+    let mut h = vec![0u8; 1024];
+    let mut put = |i: usize, v: [u8; 4]| h[4 * i..4 * i + 4].copy_from_slice(&v);
+    for (i, &n) in n.iter().enumerate() {
+        put(i, n.to_le_bytes());
+        put(7 + i, n.to_le_bytes());
+        put(10 + i, (n as f32).to_le_bytes());
+        put(16 + i, (i as i32 + 1).to_le_bytes());
+    }
+    put(52, *b"MAP ");
+    put(53, [0x44, 0x44, 0, 0]);
+    h
+}
+
+#[test]
+fn a_nifti_gzip_bomb_is_refused_after_its_volume() {
+    let s = Scratch::new("nifti");
+    let mut head = nifti(&[2, 2, 2], 2, 8, b"n+1\0");
+    head.extend_from_slice(&[7; 8]);
+    let path = s.file("bomb.nii.gz", &bomb(&head));
+    refused(&[&path], &[&path, "as NIfTI-1", "2x2x2 of uint8", "8 bytes of data expected, more follow"]);
+}
+
+#[test]
+fn an_mrc_gzip_bomb_is_refused_after_its_volume() {
+    let s = Scratch::new("mrc");
+    let mut head = mrc([2, 2, 2]);
+    head.extend_from_slice(&[7; 8]);
+    let path = s.file("bomb.mrc.gz", &bomb(&head));
+    refused(&[&path], &[&path, "as MRC/CCP4", "8 bytes of data expected, more follow"]);
+}
+
 #[test]
 fn raw_dev_zero_stops_at_the_dims() {
     refused(
         &["/dev/zero", "--dims", "4x4x4", "--dtype", "u8"],
         &["/dev/zero", "64 bytes of data expected, more follow"],
     );
+}
+
+#[test]
+fn a_nifti_pair_whose_image_is_dev_zero_stops_at_the_header() {
+    let s = Scratch::new("nifti-zero");
+    let hdr = s.file("zero.hdr", &nifti(&[4, 4, 4], 2, 8, b"ni1\0"));
+    std::os::unix::fs::symlink("/dev/zero", s.path("zero.img")).unwrap();
+    refused(&[&hdr], &[&hdr, "in the image file", "zero.img", "64 bytes of data expected, more follow"]);
+    // A .nii that is /dev/zero: its header is no header.
+    let nii = s.path("zero.nii");
+    std::os::unix::fs::symlink("/dev/zero", &nii).unwrap();
+    refused(&[nii.to_str().unwrap()], &["zero.nii", "not a NIfTI-1 file: sizeof_hdr reads 0"]);
 }
 
 /// The limit is checked from the dims and type, before reading: 4 GiB of

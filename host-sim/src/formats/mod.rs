@@ -253,6 +253,11 @@ impl<'a> Input<'a> {
         Input::new(Box::new(bytes), false, Some(bytes.len() as u64))
     }
 
+    /// Bytes taken so far.
+    pub(crate) fn pos(&self) -> u64 {
+        self.pos
+    }
+
     /// Bytes left, when the stream's length is known (an uncompressed
     /// regular file, a slice).
     pub(crate) fn remaining(&self) -> Option<u64> {
