@@ -1,8 +1,8 @@
-//! Decompression and size bombs, and streams without end: the raw, NIfTI
-//! and MRC readers take the header, then exactly the bytes it declares
-//! (inflating gzip as they read), so a small file that inflates to
-//! gigabytes, a header asking for more than `--max-volume-mb`, or a data
-//! file that is `/dev/zero` fails at once with a plain error.
+//! Decompression and size bombs, and streams without end: every volume
+//! reader takes the header, then exactly the bytes it declares (inflating
+//! gzip as it reads), so a small file that inflates to gigabytes, a header
+//! asking for more than `--max-volume-mb`, or a data file that is
+//! `/dev/zero` fails at once with a plain error.
 //!
 //! The binary runs under `ulimit -v` (address space, [`MEMORY_KB`]): a
 //! reader that held a whole inflated stream, or read `/dev/zero` to its
@@ -104,8 +104,13 @@ const BOMB: usize = 2 << 30;
 /// A gzip file of `head`, then 2 GiB of zeros (about 2 MB): gzip members
 /// of 8 MiB of zeros one after another, as gzip allows.
 fn bomb(head: &[u8]) -> Vec<u8> {
+    bomb_of(head, 0)
+}
+
+/// A gzip file of `head`, then 2 GiB of bytes `fill`.
+fn bomb_of(head: &[u8], fill: u8) -> Vec<u8> {
     const MEMBER: usize = 8 << 20;
-    let zeros = gzip(&vec![0u8; MEMBER]);
+    let zeros = gzip(&vec![fill; MEMBER]);
     let mut f = gzip(head);
     for _ in 0..BOMB / MEMBER {
         f.extend_from_slice(&zeros);
@@ -151,6 +156,20 @@ fn mrc(n: [i32; 3]) -> Vec<u8> {
     h
 }
 
+const CUBE: &str = "title\ncomment\n    1 0.0 0.0 0.0\n    2 1.0 0.0 0.0\n    2 0.0 1.0 0.0\n\
+                    2 0.0 0.0 1.0\n    1 1.0 0.0 0.0 0.0\n 1 2 3 4 5 6\n 7 8\n";
+
+fn vtk(dims: [usize; 3]) -> String {
+    format!(
+        "# vtk DataFile Version 3.0\nbomb\nBINARY\nDATASET STRUCTURED_POINTS\nDIMENSIONS {} {} {}\n\
+         POINT_DATA {}\nSCALARS s unsigned_char\nLOOKUP_TABLE default\n",
+        dims[0],
+        dims[1],
+        dims[2],
+        dims[0] * dims[1] * dims[2]
+    )
+}
+
 #[test]
 fn a_nifti_gzip_bomb_is_refused_after_its_volume() {
     let s = Scratch::new("nifti");
@@ -167,6 +186,61 @@ fn an_mrc_gzip_bomb_is_refused_after_its_volume() {
     head.extend_from_slice(&[7; 8]);
     let path = s.file("bomb.mrc.gz", &bomb(&head));
     refused(&[&path], &[&path, "as MRC/CCP4", "8 bytes of data expected, more follow"]);
+}
+
+/// A cube file's values are text: after the 8 it declares, the reader
+/// reads no more than a little text (2 GiB of blanks follow here), nor a
+/// value longer than a number (2 GiB of NUL bytes).
+#[test]
+fn a_cube_gzip_bomb_ends_after_its_text() {
+    let s = Scratch::new("cube");
+    let path = s.file("bomb.cube.gz", &bomb_of(CUBE.as_bytes(), b' '));
+    refused(&[&path], &[&path, "as Gaussian cube", "text runs on for more than", "more than 8 values take"]);
+    let path = s.file("zeros.cube.gz", &bomb(CUBE.as_bytes()));
+    refused(&[&path], &[&path, "a value of more than 256 characters in line 10: not text data"]);
+    // The same values and nothing more load.
+    let good = s.file("good.cube.gz", &gzip(CUBE.as_bytes()));
+    assert!(loaded(&[&good]).contains("dims=2x2x2"));
+}
+
+/// A VTK file may hold more arrays after the one loaded: it is loaded
+/// without reading on. A header asking for more than the limit is refused.
+#[test]
+fn a_vtk_gzip_bomb_is_not_read_past_its_volume_and_a_huge_one_is_refused() {
+    let s = Scratch::new("vtk");
+    let mut head = vtk([2, 2, 2]).into_bytes();
+    head.extend_from_slice(&[7; 8]);
+    let path = s.file("bomb.vtk.gz", &bomb(&head));
+    assert!(loaded(&[&path]).contains("dims=2x2x2"));
+    let path = s.file("huge.vtk.gz", &bomb(vtk([2048, 2048, 1024]).as_bytes()));
+    refused(
+        &[&path],
+        &[
+            &path,
+            "as VTK legacy",
+            "2048x2048x1024 uint8 samples take 4294967296 bytes (4096 MiB), more than the limit of 2048 MiB",
+            "--max-volume-mb",
+        ],
+    );
+}
+
+/// NRRD declares its sizes, and gzip-encoded data inflate to exactly them:
+/// a header asking for more than the limit is refused before inflating.
+#[test]
+fn a_nrrd_gzip_bomb_is_refused_by_its_sizes() {
+    let s = Scratch::new("nrrd");
+    let mut f = b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 1024 1024 4096\nencoding: gzip\n\n".to_vec();
+    f.extend_from_slice(&bomb(&[]));
+    let path = s.file("bomb.nrrd", &f);
+    refused(
+        &[&path],
+        &[&path, "as NRRD", "take 4294967296 bytes (4096 MiB), more than the limit of 2048 MiB"],
+    );
+    // Sizes within the limit, and more data than they hold.
+    let mut f = b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: gzip\n\n".to_vec();
+    f.extend_from_slice(&bomb(&[]));
+    let path = s.file("small.nrrd", &f);
+    refused(&[&path], &[&path, "8 bytes of gzip-encoded data", "8 bytes of data expected, more follow"]);
 }
 
 #[test]
@@ -187,6 +261,19 @@ fn a_nifti_pair_whose_image_is_dev_zero_stops_at_the_header() {
     let nii = s.path("zero.nii");
     std::os::unix::fs::symlink("/dev/zero", &nii).unwrap();
     refused(&[nii.to_str().unwrap()], &["zero.nii", "not a NIfTI-1 file: sizeof_hdr reads 0"]);
+}
+
+#[test]
+fn a_detached_nrrd_on_dev_zero_stops_at_its_sizes() {
+    let s = Scratch::new("nrrd-zero");
+    let nhdr = s.file(
+        "zero.nhdr",
+        b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 4 4 4\nencoding: raw\ndata file: /dev/zero\n",
+    );
+    refused(
+        &[&nhdr],
+        &[&nhdr, "4x4x4 uint8 samples need 64 bytes", "64 bytes of data expected, more follow"],
+    );
 }
 
 /// The limit is checked from the dims and type, before reading: 4 GiB of
@@ -217,19 +304,27 @@ fn real_data(name: &str) -> String {
 /// over it is refused, raising it lets the file through.
 #[test]
 fn max_volume_mb_refuses_and_admits_a_real_file() {
-    let den = real_data("brainsmall.den");
-    let over = "take 1376256 bytes (1.3 MiB), more than the limit of 1 MiB";
-    refused(&[&den, "--max-volume-mb", "1"], &[&den, over]);
-    assert!(loaded(&[&den, "--max-volume-mb", "2"]).contains("dims=128x128x84"));
+    // 128x128x84 int16: 2752512 bytes, 2.6 MiB.
+    let path = real_data("brainsmall_gz.nrrd");
+    let over = ["the volume's 128x128x84 int16 samples take 2752512 bytes (2.6 MiB)", "limit of 2 MiB"];
+    refused(&[&path, "--max-volume-mb", "2"], &[&[path.as_str()][..], &over[..]].concat());
+    assert!(loaded(&[&path, "--max-volume-mb", "3"]).contains("dims=128x128x84"));
     for cmd in [&["contour", "--format", "none", "--level", "60"][..], &["stats", "--level", "60"]] {
         let mut args = cmd.to_vec();
-        args.extend_from_slice(&[&den, "--max-volume-mb", "1"]);
+        args.extend_from_slice(&[&path, "--max-volume-mb", "2"]);
         let (out, _) = run_limited(&args);
         let stderr = String::from_utf8_lossy(&out.stderr);
-        assert!(!out.status.success() && stderr.contains(over), "{args:?}: {stderr}");
+        assert!(!out.status.success() && stderr.contains(over[0]), "{args:?}: {stderr}");
     }
+    // Raw files and .den files too.
+    let den = real_data("brainsmall.den");
+    refused(
+        &[&den, "--max-volume-mb", "1"],
+        &[&den, "take 1376256 bytes (1.3 MiB), more than the limit of 1 MiB"],
+    );
+    assert!(loaded(&[&den, "--max-volume-mb", "2"]).contains("dims=128x128x84"));
     // Checked when parsed.
-    let (out, _) = run_limited(&["info", &den, "--max-volume-mb", "0"]);
+    let (out, _) = run_limited(&["info", &path, "--max-volume-mb", "0"]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("`0` is out of range: give 1 to 16777216"), "{stderr}");

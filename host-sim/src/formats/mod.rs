@@ -13,10 +13,18 @@
 //!
 //! [`read`] picks the reader from the file name, or else from the first
 //! bytes; [`crate::volume::LoadedVolume::read_known`] calls it. Errors name
-//! the file and what is wrong with it (truncated data, extents that do not
-//! match the size, an unsupported type), never panic, and never allocate
-//! for data before the file has shown it holds that data (a gzip stream
-//! inflates to at most what the header asks for, where there is a header).
+//! the file and what is wrong with it (truncated data, more data than the
+//! header declares, an unsupported type), and never panic.
+//!
+//! Every reader (and the raw one) reads through one bounded `Input`: the
+//! header first, then exactly the bytes it declares (gzip inflated as it
+//! is read), then whether more follow; never a whole file or gzip stream
+//! before the header has said what it holds, so a stream without end
+//! (`/dev/zero`, a FIFO) stops where the header's sizes do. A volume whose
+//! samples would take more than [`Options::max_bytes`] (default 2 GiB) is
+//! refused from its header before anything is allocated for it
+//! (`check_size`), and text data stop at 64 bytes of text a
+//! value the header declares.
 
 use crate::volume::{Dims, Dtype, LoadedVolume, Samples};
 use anyhow::{Context, Result, bail};
@@ -195,17 +203,30 @@ fn amount(bytes: usize, whole: bool) -> String {
     }
 }
 
+/// Bytes of text a header may run to (its fields, comments, atom lines):
+/// a stream that never ends its header stops here.
+pub(crate) const HEADER_TEXT: u64 = 4 << 20;
+/// Bytes of text a value in text data may take with its separators; text
+/// data stop at this many bytes a value the header declares (plus
+/// [`TEXT_SLACK`]), so a gigantic or endless text stream ends.
+pub(crate) const TEXT_PER_VALUE: u64 = 64;
+/// Bytes of text allowed beyond [`TEXT_PER_VALUE`] per value: line ends,
+/// blank lines, a comment at the end.
+pub(crate) const TEXT_SLACK: u64 = 64 << 10;
+/// Longest token of text data: a number is far shorter.
+const LONGEST_TOKEN: usize = 256;
 /// Bytes the input buffers.
 const BUFFER: usize = 64 << 10;
 
 /// A volume file, or a part of one, as a stream of bytes that a reader
 /// takes in order, never more than it asks for: a header's first bytes
-/// ([`Input::head`]), then the data the header declares ([`Input::data`]:
-/// exactly that many bytes, and whether more follow). Nothing is read
-/// ahead beyond a small buffer, so a file is never held whole before its
-/// header has said what it holds, and a stream without end (`/dev/zero`, a
-/// FIFO) stops where the header's sizes do. A gzip file is inflated as it
-/// is read.
+/// ([`Input::head`]) or text lines ([`Input::line`]), then the data the
+/// header declares ([`Input::data`]: exactly that many bytes, and whether
+/// more follow), or text values ([`Input::token`]), at most
+/// [`Input::allow_text`] bytes of them. Nothing is read ahead beyond a
+/// small buffer, so a file is never held whole before its header has said
+/// what it holds, and a stream without end (`/dev/zero`, a FIFO) stops
+/// where the header's sizes do. A gzip file is inflated as it is read.
 pub(crate) struct Input<'a> {
     src: Box<dyn Read + 'a>,
     /// Bytes read from `src` are `buf[..end]`, those before `at` taken
@@ -219,11 +240,34 @@ pub(crate) struct Input<'a> {
     gzip: bool,
     /// Bytes in all, when known (a regular file, a slice; not gzip).
     size: Option<u64>,
+    /// Bytes taken as text, how many may be, and the last allowance.
+    text: u64,
+    text_cap: u64,
+    text_allowed: u64,
+    text_why: String,
+    /// Line ends taken as text.
+    lines: usize,
+    /// Whether the last line ended at the end of the stream, not in `\n`.
+    cut: bool,
 }
 
 impl<'a> Input<'a> {
     fn new(src: Box<dyn Read + 'a>, gzip: bool, size: Option<u64>) -> Self {
-        Input { src, buf: vec![0; BUFFER].into_boxed_slice(), at: 0, end: 0, pos: 0, gzip, size }
+        Input {
+            src,
+            buf: vec![0; BUFFER].into_boxed_slice(),
+            at: 0,
+            end: 0,
+            pos: 0,
+            gzip,
+            size,
+            text: 0,
+            text_cap: HEADER_TEXT,
+            text_allowed: HEADER_TEXT,
+            text_why: "a header takes".to_string(),
+            lines: 0,
+            cut: false,
+        }
     }
 
     /// Open `path`, inflating it as it is read if it starts like gzip.
@@ -253,6 +297,14 @@ impl<'a> Input<'a> {
         Input::new(Box::new(bytes), false, Some(bytes.len() as u64))
     }
 
+    /// The rest of the stream, inflated as gzip (positions and text
+    /// allowance start again from 0).
+    pub(crate) fn gunzip_rest(self) -> Input<'a> {
+        let rest = self.avail().to_vec();
+        let src = std::io::BufReader::new(std::io::Cursor::new(rest).chain(self.src));
+        Input::new(Box::new(flate2::bufread::MultiGzDecoder::new(src)), true, None)
+    }
+
     /// Bytes taken so far.
     pub(crate) fn pos(&self) -> u64 {
         self.pos
@@ -262,6 +314,17 @@ impl<'a> Input<'a> {
     /// regular file, a slice).
     pub(crate) fn remaining(&self) -> Option<u64> {
         self.size.map(|s| s.saturating_sub(self.pos))
+    }
+
+    /// The number of the line that text reads are in, from 1.
+    pub(crate) fn line_no(&self) -> usize {
+        self.lines + 1
+    }
+
+    /// Whether the last [`Input::line`] ended at the end of the stream
+    /// rather than in a line end.
+    pub(crate) fn line_was_cut(&self) -> bool {
+        self.cut
     }
 
     fn read_error(&self, e: std::io::Error) -> anyhow::Error {
@@ -353,6 +416,101 @@ impl<'a> Input<'a> {
         let start = self.pos;
         Data { input: self, start, len: len as u64 }
     }
+
+    /// Allow `bytes` more bytes of text from here on ([`Input::line`],
+    /// [`Input::token`]) for `why` (as in "12 values take"), instead of what
+    /// was allowed before. At first a header's worth, [`HEADER_TEXT`].
+    pub(crate) fn allow_text(&mut self, bytes: u64, why: impl Into<String>) {
+        self.text_cap = self.text.saturating_add(bytes);
+        self.text_allowed = bytes;
+        self.text_why = why.into();
+    }
+
+    /// Take `n` buffered bytes as text, holding `newlines` line ends.
+    fn take_text(&mut self, n: usize, newlines: usize) -> Result<()> {
+        if self.text.saturating_add(n as u64) > self.text_cap {
+            bail!(
+                "the text runs on for more than {} bytes, more than {} (a gigantic or endless file?)",
+                self.text_allowed,
+                self.text_why
+            );
+        }
+        self.text += n as u64;
+        self.lines += newlines;
+        self.consume(n);
+        Ok(())
+    }
+
+    /// The next line of text, without its `\n` (or `\r\n`); `None` at the
+    /// end of the stream.
+    pub(crate) fn line(&mut self) -> Result<Option<Vec<u8>>> {
+        let mut line = Vec::new();
+        loop {
+            if self.avail().is_empty() && !self.fill()? {
+                self.cut = !line.is_empty();
+                return Ok((!line.is_empty()).then_some(line));
+            }
+            let a = self.avail();
+            let (k, end) = match a.iter().position(|&c| c == b'\n') {
+                Some(i) => (i + 1, true),
+                None => (a.len(), false),
+            };
+            line.extend_from_slice(a.get(..k).unwrap_or_default());
+            self.take_text(k, usize::from(end))?;
+            if end {
+                line.pop();
+                if line.last() == Some(&b'\r') {
+                    line.pop();
+                }
+                self.cut = false;
+                return Ok(Some(line));
+            }
+        }
+    }
+
+    /// The next value of text data into `tok`: a run of bytes between
+    /// white space (and commas, if `comma`); `false` at the end of the
+    /// stream. Bytes that are not UTF-8 become U+FFFD (and the value then
+    /// fails to parse).
+    pub(crate) fn token(&mut self, tok: &mut String, comma: bool) -> Result<bool> {
+        let sep = |c: u8| c.is_ascii_whitespace() || (comma && c == b',');
+        loop {
+            if self.avail().is_empty() && !self.fill()? {
+                return Ok(false);
+            }
+            let a = self.avail();
+            let k = a.iter().position(|&c| !sep(c)).unwrap_or(a.len());
+            let newlines = a.get(..k).unwrap_or_default().iter().filter(|&&c| c == b'\n').count();
+            let more = k == a.len();
+            self.take_text(k, newlines)?;
+            if !more {
+                break;
+            }
+        }
+        let mut bytes = Vec::new();
+        loop {
+            if self.avail().is_empty() && !self.fill()? {
+                break;
+            }
+            let a = self.avail();
+            let k = a.iter().position(|&c| sep(c)).unwrap_or(a.len());
+            if bytes.len() + k > LONGEST_TOKEN {
+                bail!(
+                    "a value of more than {LONGEST_TOKEN} characters in line {}: not text data",
+                    self.line_no()
+                );
+            }
+            bytes.extend_from_slice(a.get(..k).unwrap_or_default());
+            let more = k == a.len();
+            self.take_text(k, 0)?;
+            if !more {
+                break;
+            }
+        }
+        tok.clear();
+        tok.push_str(&String::from_utf8_lossy(&bytes));
+        Ok(true)
+    }
 }
 
 /// The data a header declares, [`Input::data`]: parts taken or passed over
@@ -424,30 +582,9 @@ fn sniff_file(path: &Path) -> Option<Format> {
     Format::sniff(input.avail())
 }
 
-/// Read a whole file, naming it if that fails.
-pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>> {
-    std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))
-}
-
 /// Whether `bytes` start like a gzip stream.
 pub(crate) fn is_gzip(bytes: &[u8]) -> bool {
     bytes.starts_with(&[0x1f, 0x8b])
-}
-
-/// Inflate a gzip stream (all its members), reading at most `limit` bytes
-/// out: the caller checks the length it gets.
-pub(crate) fn gunzip(bytes: &[u8], limit: usize) -> Result<Vec<u8>> {
-    let mut out = Vec::new();
-    flate2::read::MultiGzDecoder::new(bytes)
-        .take(limit as u64)
-        .read_to_end(&mut out)
-        .map_err(|e| anyhow::anyhow!("the gzip data is corrupt or cut short ({e})"))?;
-    Ok(out)
-}
-
-/// The whole file gunzipped when it is gzip, as it is otherwise.
-pub(crate) fn maybe_gunzip(bytes: Vec<u8>) -> Result<Vec<u8>> {
-    if is_gzip(&bytes) { gunzip(&bytes, usize::MAX).context("cannot gunzip the file") } else { Ok(bytes) }
 }
 
 /// Byte order of binary samples.
@@ -641,32 +778,41 @@ pub(crate) fn f16_to_f32(h: u16) -> f32 {
     f32::from_bits(bits)
 }
 
-/// Samples from whitespace-separated numbers in text: exactly `count` of
-/// them taken from `tokens`, parsed as `elem` (integers must be whole and in
-/// range). `what` names the values in errors.
-pub(crate) fn parse_text<'a>(
-    tokens: &mut impl Iterator<Item = &'a str>,
+/// Samples from numbers in text data: exactly `count` values taken from
+/// `input` ([`Input::token`], commas separating too if `comma`), parsed as
+/// `elem` (integers must be whole and in range), of which those at `keep.0`,
+/// `keep.0 + keep.1`, ... are kept (several values to a point: one of them).
+/// `what` names the values in errors. The caller has allowed the text
+/// ([`Input::allow_text`]).
+pub(crate) fn parse_text(
+    input: &mut Input<'_>,
+    comma: bool,
     count: usize,
+    keep: (usize, usize),
     elem: Elem,
     what: &str,
 ) -> Result<Samples> {
-    fn take<'a, T>(
-        tokens: &mut impl Iterator<Item = &'a str>,
-        count: usize,
+    fn take<T>(
+        input: &mut Input<'_>,
+        (comma, count, keep): (bool, usize, (usize, usize)),
         what: &str,
         elem: Elem,
         conv: impl Fn(f64) -> Option<T>,
     ) -> Result<Vec<T>> {
+        let step = keep.1.max(1);
         // Grow as values come: the count is the file's word, not yet its data.
-        let mut out = Vec::with_capacity(count.min(1 << 20));
+        let mut out = Vec::with_capacity((count / step).min(1 << 20));
+        let mut tok = String::new();
         for i in 0..count {
-            let Some(tok) = tokens.next() else {
+            if !input.token(&mut tok, comma)? {
                 bail!("the {what} are truncated: {i} of {count} values");
-            };
-            let v = parse_number(tok).and_then(&conv).with_context(|| {
+            }
+            let v = parse_number(&tok).and_then(&conv).with_context(|| {
                 format!("value {} of the {what}, `{tok}`, is not a valid {}", i + 1, elem.name())
             })?;
-            out.push(v);
+            if i % step == keep.0 {
+                out.push(v);
+            }
         }
         Ok(out)
     }
@@ -676,12 +822,13 @@ pub(crate) fn parse_text<'a>(
         }
         T::try_from(v as i64).ok()
     }
+    let how = (comma, count, keep);
     Ok(match elem {
-        Elem::U8 => Samples::U8(take(tokens, count, what, elem, int::<u8>)?),
-        Elem::I8 => Samples::I16(take(tokens, count, what, elem, |v| int::<i8>(v).map(i16::from))?),
-        Elem::I16 => Samples::I16(take(tokens, count, what, elem, int::<i16>)?),
-        Elem::U16 => Samples::U16(take(tokens, count, what, elem, int::<u16>)?),
-        _ => Samples::F32(take(tokens, count, what, elem, |v| Some(v as f32))?),
+        Elem::U8 => Samples::U8(take(input, how, what, elem, int::<u8>)?),
+        Elem::I8 => Samples::I16(take(input, how, what, elem, |v| int::<i8>(v).map(i16::from))?),
+        Elem::I16 => Samples::I16(take(input, how, what, elem, int::<i16>)?),
+        Elem::U16 => Samples::U16(take(input, how, what, elem, int::<u16>)?),
+        _ => Samples::F32(take(input, how, what, elem, |v| Some(v as f32))?),
     })
 }
 
@@ -861,36 +1008,21 @@ mod tests {
 
     #[test]
     fn text_numbers() {
-        let mut t = "1 2.5e1 -3.0D-01 nan".split_ascii_whitespace();
-        let Samples::F32(v) = parse_text(&mut t, 4, Elem::F64, "values").unwrap() else { panic!() };
+        let parse = |s: &str, count, elem| {
+            parse_text(&mut Input::from_slice(s.as_bytes()), false, count, (0, 1), elem, "data")
+        };
+        let Samples::F32(v) = parse("1 2.5e1 -3.0D-01 nan", 4, Elem::F64).unwrap() else { panic!() };
         assert_eq!(&v[..3], [1.0, 25.0, -0.3]);
         assert!(v[3].is_nan());
-        let e = |s: &str, elem| {
-            format!("{:#}", parse_text(&mut s.split_ascii_whitespace(), 3, elem, "data").unwrap_err())
-        };
+        let e = |s: &str, elem| format!("{:#}", parse(s, 3, elem).unwrap_err());
         assert!(e("1 2", Elem::U8).contains("truncated: 2 of 3"), "{}", e("1 2", Elem::U8));
         assert!(e("1 256 3", Elem::U8).contains("value 2 of the data, `256`, is not a valid uint8"));
         assert!(e("1 2.5 3", Elem::I16).contains("`2.5`"));
         assert!(e("1 x 3", Elem::F32).contains("`x`"));
-        assert_eq!(
-            parse_text(&mut "-128 127".split(' '), 2, Elem::I8, "d").unwrap(),
-            Samples::I16(vec![-128, 127])
-        );
-    }
-
-    #[test]
-    fn gunzip_is_bounded_and_reports_corruption() {
-        use std::io::Write;
-        let mut z = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
-        z.write_all(&[7u8; 1000]).unwrap();
-        let gz = z.finish().unwrap();
-        assert_eq!(gunzip(&gz, usize::MAX).unwrap(), vec![7u8; 1000]);
-        assert_eq!(gunzip(&gz, 10).unwrap().len(), 10);
-        let e = format!("{:#}", gunzip(&gz[..gz.len() / 2], usize::MAX).unwrap_err());
-        assert!(e.contains("corrupt or cut short"), "{e}");
-        let mut bad = gz.clone();
-        bad[12] ^= 0xff;
-        assert!(gunzip(&bad, usize::MAX).is_err());
+        assert_eq!(parse("-128\n127", 2, Elem::I8).unwrap(), Samples::I16(vec![-128, 127]));
+        // Commas separate too if asked; every other value kept.
+        let mut input = Input::from_slice(b"1,2, 3 ,4");
+        assert_eq!(parse_text(&mut input, true, 4, (1, 2), Elem::U8, "d").unwrap(), Samples::U8(vec![2, 4]));
     }
 
     fn error<T: std::fmt::Debug>(r: Result<T>) -> String {
@@ -952,8 +1084,58 @@ mod tests {
         let mut data = input.data(1 << 20);
         data.take(1 << 20).unwrap();
         assert!(error(data.finish()).contains("corrupt"));
+        // The rest of a stream after a text header, inflated.
+        let mut f = b"header\n".to_vec();
+        f.extend_from_slice(&gz);
+        let mut input = Input::from_slice(&f);
+        assert_eq!(input.line().unwrap().unwrap(), b"header");
+        let mut rest = input.gunzip_rest();
+        let mut data = rest.data(1 << 20);
+        assert_eq!(data.take(1 << 20).unwrap(), vec![5; 1 << 20]);
+        data.finish().unwrap();
         assert!(error(Input::open(&dir.join("missing")).map(|_| ())).contains("cannot read"));
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn text_reads_are_bounded() {
+        let mut input = Input::from_slice(b"one\r\n\ntwo\nthree");
+        assert_eq!(input.line().unwrap().unwrap(), b"one");
+        assert_eq!(input.line().unwrap().unwrap(), b"");
+        assert_eq!(input.line_no(), 3);
+        assert_eq!(input.line().unwrap().unwrap(), b"two");
+        assert!(!input.line_was_cut());
+        assert_eq!(input.line().unwrap().unwrap(), b"three");
+        assert!(input.line_was_cut());
+        assert_eq!(input.line().unwrap(), None);
+        // Blanks without end stop at the allowance.
+        let blanks = format!("1{}2", " ".repeat(100_000));
+        let mut input = Input::from_slice(blanks.as_bytes());
+        input.allow_text(1000, "2 values take");
+        let mut tok = String::new();
+        assert!(input.token(&mut tok, false).unwrap() && tok == "1");
+        let e = error(input.token(&mut tok, false));
+        assert_eq!(
+            e,
+            "the text runs on for more than 1000 bytes, more than 2 values take (a gigantic or endless file?)"
+        );
+        // So does a line without end, even at first (a header's worth).
+        let endless = vec![b'x'; (HEADER_TEXT + 1) as usize];
+        assert!(error(Input::from_slice(&endless).line()).contains("more than a header takes"));
+        // A value longer than a number is no value.
+        let long = format!("1 {} 2", "9".repeat(300));
+        let mut input = Input::from_slice(long.as_bytes());
+        input.token(&mut tok, false).unwrap();
+        assert!(
+            error(input.token(&mut tok, false)).contains("a value of more than 256 characters in line 1")
+        );
+        // Commas, line ends, and the end.
+        let mut input = Input::from_slice(b" a,b\n\nc ");
+        let mut all = Vec::new();
+        while input.token(&mut tok, true).unwrap() {
+            all.push(tok.clone());
+        }
+        assert_eq!((all, input.line_no()), (vec!["a".to_string(), "b".into(), "c".into()], 3));
     }
 
     #[test]
