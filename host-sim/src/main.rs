@@ -378,6 +378,14 @@ struct Source {
     /// orbital, a VTK array), from 0.
     #[arg(long = "volume", value_name = "N", default_value_t = 0, requires = "input")]
     volume_index: usize,
+    /// The most memory a volume's samples may take, in MiB (2^20 bytes), in
+    /// the file's sample type or as loaded: a file whose header (or
+    /// --dims and --dtype) asks for more is refused before its samples are
+    /// read. 1 to 16777216 (the default, 2048, is 2 GiB).
+    #[arg(long, value_name = "MB", requires = "input",
+          default_value_t = isoscope_sim::formats::DEFAULT_MAX_BYTES >> 20,
+          value_parser = in_range::<1, 16_777_216, usize>)]
+    max_volume_mb: usize,
     /// A built-in volume instead of a file: hydrogen:N (the paper's Figure 1,
     /// 3d_xy orbital), gyroid:N, sphere:N or torus:N.
     #[arg(long, value_name = "NAME:N")]
@@ -480,8 +488,11 @@ fn parse_level(s: &str) -> Result<f32, String> {
 fn load(source: &Source) -> Result<(LoadedVolume, Option<DemoSpec>)> {
     match (&source.input, source.demo) {
         (Some(path), None) => {
+            // No overflow below 16 TiB on a 64-bit machine; a 32-bit one
+            // cannot hold more than `usize::MAX` anyway.
+            let max_bytes = source.max_volume_mb.saturating_mul(1 << 20);
             if source.dims.is_none() && source.dtype.is_none() {
-                let opts = isoscope_sim::formats::Options { index: source.volume_index };
+                let opts = isoscope_sim::formats::Options { index: source.volume_index, max_bytes };
                 if let Some((v, notes)) = LoadedVolume::read_known_with(path, &opts)? {
                     for n in &notes {
                         eprintln!("isoscope-sim: note: {}: {n}", path.display());
@@ -495,7 +506,7 @@ fn load(source: &Source) -> Result<(LoadedVolume, Option<DemoSpec>)> {
             if source.volume_index > 0 {
                 bail!("a raw file holds one volume; --volume {} asks for another", source.volume_index);
             }
-            Ok((LoadedVolume::read_raw_endian(path, dims, dtype, endian)?, None))
+            Ok((LoadedVolume::read_raw_endian(path, dims, dtype, endian, max_bytes)?, None))
         }
         (None, Some(_)) if source.volume_index > 0 => {
             bail!("a demo is one volume; --volume {} asks for another", source.volume_index)

@@ -1,5 +1,6 @@
 //! Volume sources: raw little-endian files and the built-in demos.
 
+use crate::formats::{self, Input};
 use anyhow::{Context, Result, bail};
 use isoscope_core::demo::Demo;
 use std::path::Path;
@@ -172,13 +173,6 @@ impl LoadedVolume {
 
     /// Decode raw samples in the given byte order.
     pub fn from_bytes_endian(bytes: &[u8], dims: Dims, dtype: Dtype, endian: Endian) -> Result<Self> {
-        if endian == Endian::Big && dtype.size() > 1 {
-            let mut swapped = bytes.to_vec();
-            for c in swapped.chunks_exact_mut(dtype.size()) {
-                c.reverse();
-            }
-            return Self::from_bytes_endian(&swapped, dims, dtype, Endian::Little);
-        }
         let count = dims.count().context("the volume extents overflow")?;
         let expected = count.checked_mul(dtype.size()).context("the volume extents overflow")?;
         if bytes.len() != expected {
@@ -197,29 +191,30 @@ impl LoadedVolume {
                 }
             );
         }
-        let samples = match dtype {
-            Dtype::U8 => Samples::U8(bytes.to_vec()),
-            Dtype::U16 => {
-                Samples::U16(bytes.chunks_exact(2).map(|c| u16::from_le_bytes([c[0], c[1]])).collect())
-            }
-            Dtype::I16 => {
-                Samples::I16(bytes.chunks_exact(2).map(|c| i16::from_le_bytes([c[0], c[1]])).collect())
-            }
-            Dtype::F32 => Samples::F32(
-                bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect(),
-            ),
-        };
-        Ok(Self { dims, samples, spacing: UNIT_SPACING })
+        Ok(Self::decoded(bytes.to_vec(), dims, dtype, endian))
+    }
+
+    /// Decode exactly the bytes of `dims` samples of `dtype`.
+    fn decoded(bytes: Vec<u8>, dims: Dims, dtype: Dtype, endian: Endian) -> Self {
+        let samples = formats::decode(bytes, dtype.into(), endian.into());
+        Self { dims, samples, spacing: UNIT_SPACING }
     }
 
     /// Decode a VolPack density file (`.den`): a 62-byte header (version 1,
     /// in either byte order; original, extracted and map extents; warps;
-    /// sample count), then `u8` samples, x fastest.
+    /// sample count), then exactly that many `u8` samples, x fastest.
     pub fn from_den(bytes: &[u8]) -> Result<Self> {
+        Self::read_den(&mut Input::from_slice(bytes), usize::MAX)
+    }
+
+    /// Read a `.den` file from `input`, refusing one whose samples take
+    /// more than `max_bytes`.
+    fn read_den(input: &mut Input<'_>, max_bytes: usize) -> Result<Self> {
         const HEADER: usize = 62;
-        let header = bytes.get(..HEADER).with_context(|| {
-            format!("a .den file starts with a {HEADER}-byte header; this one has only {} bytes", bytes.len())
-        })?;
+        let header = input.head(HEADER)?;
+        if header.len() < HEADER {
+            bail!("a .den file starts with a {HEADER}-byte header; this one has only {} bytes", header.len());
+        }
         let swap = match [header[0], header[1]] {
             [0, 1] => false,
             [1, 0] => true,
@@ -241,12 +236,15 @@ impl LoadedVolume {
         if i64::from(count) != (len[0] as i64) * (len[1] as i64) * (len[2] as i64) {
             bail!("the .den header is inconsistent: {count} samples for extents {len:?}");
         }
-        let body = &bytes[HEADER..];
-        let need = count as usize;
-        if body.len() < need {
-            bail!("the .den file is truncated: {} of {need} sample bytes after the header", body.len());
-        }
-        Ok(Self { dims, samples: Samples::U8(body[..need].to_vec()), spacing: UNIT_SPACING })
+        let need = formats::check_size(&[dims.0, dims.1, dims.2], formats::Elem::U8, max_bytes)?;
+        let mut data = input.data(need);
+        let body = data.take(need).and_then(|b| data.finish().map(|()| b)).with_context(|| {
+            format!(
+                "the .den header's {}x{}x{} samples need {need} bytes after the header",
+                dims.0, dims.1, dims.2
+            )
+        })?;
+        Ok(Self { dims, samples: Samples::U8(body), spacing: UNIT_SPACING })
     }
 
     /// Read a volume file whose format its name tells (`.den`, and those of
@@ -254,36 +252,54 @@ impl LoadedVolume {
     /// bytes ([`crate::formats::Format::sniff`]); `Ok(None)` for any other
     /// file (a raw one). A file holding several volumes gives its first.
     pub fn read_known(path: &Path) -> Result<Option<Self>> {
-        Ok(Self::read_known_with(path, &crate::formats::Options::default())?.map(|(v, _)| v))
+        Ok(Self::read_known_with(path, &formats::Options::default())?.map(|(v, _)| v))
     }
 
     /// As [`LoadedVolume::read_known`], choosing among several volumes with
-    /// `opts`, and with the reader's remarks for the user (conversions,
-    /// units, which volume was taken).
-    pub fn read_known_with(
-        path: &Path,
-        opts: &crate::formats::Options,
-    ) -> Result<Option<(Self, Vec<String>)>> {
+    /// `opts` (which also bound the volume's size), and with the reader's
+    /// remarks for the user (conversions, units, which volume was taken).
+    pub fn read_known_with(path: &Path, opts: &formats::Options) -> Result<Option<(Self, Vec<String>)>> {
         match path.extension().and_then(|e| e.to_str()) {
             Some("den") => {
-                let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-                let v = Self::from_den(&bytes).with_context(|| format!("cannot load {}", path.display()))?;
+                let v = Input::open_plain(path)
+                    .and_then(|mut input| Self::read_den(&mut input, opts.max_bytes))
+                    .with_context(|| format!("cannot load {}", path.display()))?;
                 Ok(Some((v, Vec::new())))
             }
-            _ => Ok(crate::formats::read(path, opts)?.map(|l| (l.volume, l.notes))),
+            _ => Ok(formats::read(path, opts)?.map(|l| (l.volume, l.notes))),
         }
     }
 
-    /// Read a raw volume file in the given byte order.
-    pub fn read_raw_endian(path: &Path, dims: Dims, dtype: Dtype, endian: Endian) -> Result<Self> {
-        let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-        Self::from_bytes_endian(&bytes, dims, dtype, endian)
-            .with_context(|| format!("cannot load {}", path.display()))
+    /// Read a raw volume file in the given byte order: exactly the bytes
+    /// of `dims` samples of `dtype`, refusing a file with fewer or more
+    /// (it stops reading there: a stream without end is refused too), and
+    /// refusing samples that take more than `max_bytes` before reading any
+    /// ([`formats::Options::max_bytes`]).
+    pub fn read_raw_endian(
+        path: &Path,
+        dims: Dims,
+        dtype: Dtype,
+        endian: Endian,
+        max_bytes: usize,
+    ) -> Result<Self> {
+        let load = || -> Result<Self> {
+            let need = formats::check_size(&[dims.0, dims.1, dims.2], dtype.into(), max_bytes)?;
+            let mut input = Input::open_plain(path)?;
+            let mut data = input.data(need);
+            let bytes = data.take(need).and_then(|b| data.finish().map(|()| b)).with_context(|| {
+                format!(
+                    "{}x{}x{} {dtype:?} samples need {need} bytes (wrong --dims/--dtype?)",
+                    dims.0, dims.1, dims.2
+                )
+            })?;
+            Ok(Self::decoded(bytes, dims, dtype, endian))
+        };
+        load().with_context(|| format!("cannot load {}", path.display()))
     }
 
-    /// Read a raw little-endian volume file.
+    /// Read a raw little-endian volume file (of at most the default
+    /// [`formats::DEFAULT_MAX_BYTES`]).
     pub fn read_raw(path: &Path, dims: Dims, dtype: Dtype) -> Result<Self> {
-        let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-        Self::from_bytes(&bytes, dims, dtype).with_context(|| format!("cannot load {}", path.display()))
+        Self::read_raw_endian(path, dims, dtype, Endian::Little, formats::DEFAULT_MAX_BYTES)
     }
 }

@@ -447,19 +447,25 @@ fn file_too_short_or_too_long() {
     // 14 bytes; 2x2x2 u16 needs 16.
     assert_error(
         &[&path, "--dims", "2x2x2", "--dtype", "u16", "--level", "1"],
-        &[&path, "truncated", "14 bytes", "16 bytes"],
+        &[&path, "2x2x2 U16 samples need 16 bytes", "the data stop after 14 of 16 bytes (truncated?)"],
     );
     // 14 bytes; 3x2x1 u16 needs 12.
     assert_error(
         &[&path, "--dims", "3x2x1", "--dtype", "u16", "--level", "1"],
-        &[&path, "14 bytes", "12 bytes"],
+        &[&path, "12 bytes of data expected, and 2 more follow"],
     );
     // An odd length for 2-byte samples.
     let odd = dir.file("odd.i16", &[0u8; 9]);
-    assert_error(&[&odd, "--dims", "2x2x1", "--dtype", "i16", "--level", "1"], &["9 bytes", "8 bytes"]);
+    assert_error(
+        &[&odd, "--dims", "2x2x1", "--dtype", "i16", "--level", "1"],
+        &["8 bytes of data expected, and 1 more follow"],
+    );
     // The empty file.
     let empty = dir.file("empty.f32", &[]);
-    assert_error(&[&empty, "--dims", "1x1x1", "--dtype", "f32", "--level", "1"], &["0 bytes", "truncated"]);
+    assert_error(
+        &[&empty, "--dims", "1x1x1", "--dtype", "f32", "--level", "1"],
+        &["the data stop after 0 of 4 bytes (truncated?)"],
+    );
 }
 
 #[test]

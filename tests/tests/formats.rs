@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 
 fn load_index(name: &str, index: usize) -> Loaded {
     let path = real_data(name);
-    formats::read(&path, &Options { index })
+    formats::read(&path, &Options { index, ..Options::default() })
         .unwrap_or_else(|e| panic!("{name}: {e:#}"))
         .unwrap_or_else(|| panic!("{name}: not a known format"))
 }
@@ -184,7 +184,8 @@ fn cube_n2o_homo_and_lumo_are_transposed_to_x_fastest() {
         );
         assert!(l.notes.iter().any(|n| n.contains("Bohr")));
     }
-    let e = formats::read(&real_data("N2O_homo+lumo.cube.gz"), &Options { index: 2 }).unwrap_err();
+    let e = formats::read(&real_data("N2O_homo+lumo.cube.gz"), &Options { index: 2, ..Options::default() })
+        .unwrap_err();
     assert!(format!("{e:#}").contains("2 value(s) per point; value 2 was asked for"), "{e:#}");
 }
 
@@ -249,7 +250,8 @@ fn nifti_4d_gives_each_time_point() {
         );
     }
     assert_eq!(summary(&load("example4d.nii.gz").volume).argmax, (64, 49, 0));
-    let e = formats::read(&real_data("example4d.nii.gz"), &Options { index: 2 }).unwrap_err();
+    let e = formats::read(&real_data("example4d.nii.gz"), &Options { index: 2, ..Options::default() })
+        .unwrap_err();
     assert!(format!("{e:#}").contains("holds 2 volume(s) of 128x96x24; volume 2 was asked for"), "{e:#}");
 }
 
@@ -378,7 +380,10 @@ fn broken_mrc_files_are_clear_errors() {
         &["truncated: an MRC/CCP4 header is 1024 bytes, the file has 500"],
     );
     error(&s.copy(name, |b| b.truncate(1200)), &["extended header of 640 bytes"]);
-    error(&s.copy(name, |b| b.extend_from_slice(&[0; 8])), &["do not match the file size"]);
+    error(
+        &s.copy(name, |b| b.extend_from_slice(&[0; 8])),
+        &["2042880 bytes of data expected, and 8 more follow"],
+    );
     error(&s.copy(name, |b| set_word(b, 3, 3)), &["mode 3 (complex samples) is not supported"]);
     error(&s.copy(name, |b| set_word(b, 16, 1)), &["MAPC, MAPR, MAPS = 1, 1, 3 is not a permutation"]);
     error(&s.copy(name, |b| set_word(b, 1, 77)), &["96x77x70", "need 2069760 bytes"]);
@@ -424,7 +429,7 @@ fn broken_nrrd_files_are_clear_errors() {
     let name = "brainsmall_gz.nrrd";
     error(
         &s.copy(name, |b| b.truncate(b.len() - 1000)),
-        &["as NRRD", "cannot inflate the gzip-encoded data"],
+        &["as NRRD", "of gzip-encoded data: cannot gunzip: the gzip data are corrupt or cut short"],
     );
     let edit = |from: &'static str, to: &'static str| {
         move |b: &mut Vec<u8>| {
@@ -434,11 +439,11 @@ fn broken_nrrd_files_are_clear_errors() {
     };
     error(
         &s.copy(name, edit("sizes: 128 128 84", "sizes: 128 128 85")),
-        &["128x128x85 int16 samples need 2785280 bytes", "hold 2752512"],
+        &["128x128x85 int16 samples need 2785280 bytes", "the data stop after 2752512 of 2785280 bytes"],
     );
     error(
         &s.copy(name, edit("sizes: 128 128 84", "sizes: 128 128 83")),
-        &["sizes that do not match the data"],
+        &["2719744 bytes of data expected, more follow"],
     );
     error(&s.copy(name, edit("type: short", "type: quad")), &["`quad` is not a NRRD type"]);
     error(&s.copy(name, edit("encoding: gzip", "encoding: bz2")), &["bzip2-encoded data are not supported"]);
@@ -446,7 +451,7 @@ fn broken_nrrd_files_are_clear_errors() {
     // A detached header whose data file is cut short, or missing.
     let hdr = s.copy("BrainProtonDensitySliceBorder20.nhdr", |_| {});
     s.copy("BrainProtonDensitySliceBorder20.raw", |b| b.truncate(1000));
-    error(&hdr, &["221x257x1 uint8 samples need 56797 bytes, but the data hold 1000"]);
+    error(&hdr, &["221x257x1 uint8 samples need 56797 bytes: the data stop after 1000 of 56797 bytes"]);
     std::fs::remove_file(s.0.join("BrainProtonDensitySliceBorder20.raw")).unwrap();
     error(&hdr, &["cannot read the header's data file", "BrainProtonDensitySliceBorder20.raw"]);
 }
@@ -527,4 +532,40 @@ fn cut_and_corrupted_real_files_never_panic() {
             assert!(LoadedVolume::read_known(&path).is_err(), "{name} cut at {cut}");
         }
     }
+}
+
+/// Every reader checks `max_bytes` from its header before reading the
+/// samples: each real file is refused with a limit one byte short of what
+/// its volume takes (in the file's type or as loaded, whichever is more),
+/// and loads at exactly that. A 4D NIfTI larger than the limit gives each
+/// of its volumes, reading no further than the one taken.
+#[test]
+fn every_format_refuses_a_volume_over_the_limit() {
+    for (name, bytes) in [
+        ("1jzv.ccp4", 76 * 96 * 70 * 4),
+        ("ispg_0.mrc", 97 * 97 * 97 * 4),
+        ("N2O_homo+lumo.cube.gz", 19 * 19 * 31 * 4),
+        ("anatomical.nii", 33 * 41 * 25 * 2),
+        ("reoriented_anat_moved.nii", 21 * 26 * 22 * 4),
+        ("standard.nii.gz", 4 * 5 * 7),
+        ("example4d.nii.gz", 128 * 96 * 24 * 2),
+        ("brainsmall_gz.nrrd", 128 * 128 * 84 * 2),
+        ("BrainProtonDensitySliceBorder20.nhdr", 221 * 257),
+        ("uniform.vtk", 10 * 10 * 10 * 8),
+    ] {
+        let path = real_data(name);
+        let opts = |index, max_bytes| Options { index, max_bytes };
+        let e = format!("{:#}", formats::read(&path, &opts(0, bytes - 1)).unwrap_err());
+        assert!(
+            e.contains(&path.display().to_string())
+                && e.contains(&format!("samples take {bytes} bytes"))
+                && e.contains(&format!("more than the limit of {}", bytes - 1))
+                && e.contains("--max-volume-mb raises it"),
+            "{name}: {e}"
+        );
+        let l = formats::read(&path, &opts(0, bytes)).unwrap_or_else(|e| panic!("{name}: {e:#}")).unwrap();
+        assert_eq!(l.volume, load(name).volume, "{name}");
+    }
+    let second = formats::read(&real_data("example4d.nii.gz"), &Options { index: 1, max_bytes: 589_824 });
+    assert_eq!(second.unwrap().unwrap().volume, load_index("example4d.nii.gz", 1).volume);
 }

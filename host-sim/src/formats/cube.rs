@@ -10,19 +10,38 @@
 //! (default the first). Spacing: the lengths of the axis vectors, in Bohr
 //! when `N_i > 0` and in Å when negative; a skew between non-orthogonal
 //! axes is not kept (the reader says so).
+//!
+//! The text is read line by line, then value by value, up to the values
+//! the header declares: at most 64 bytes of text a value, so a gigantic or
+//! endless file ends with an error.
 
-use super::{Elem, Format, Loaded, Options, maybe_gunzip, parse_number, permute, read_file, voxel_size};
+use super::{
+    Elem, Format, HEADER_TEXT, Input, Loaded, Options, TEXT_PER_VALUE, TEXT_SLACK, check_size, parse_number,
+    parse_text, permute, voxel_size,
+};
 use crate::volume::{LoadedVolume, Samples};
 use anyhow::{Context, Result, anyhow, bail};
 use std::path::Path;
 
+/// Text a line of an atom may take.
+const ATOM_TEXT: u64 = 256;
+
 /// Read a cube file (gzip compressed or not).
 pub fn read(path: &Path, opts: &Options) -> Result<Loaded> {
-    parse(&maybe_gunzip(read_file(path)?)?, opts)
+    read_from(&mut Input::open(path)?, opts)
+}
+
+/// The next line, which must be text.
+fn line(input: &mut Input<'_>) -> Result<Option<String>> {
+    let no = input.line_no();
+    input
+        .line()?
+        .map(|l| String::from_utf8(l).map_err(|_| anyhow!("not a text file: line {no} is not UTF-8")))
+        .transpose()
 }
 
 /// Numbers of a header line, with its line number for errors.
-fn numbers(line: Option<&str>, no: usize, what: &str, min: usize) -> Result<Vec<f64>> {
+fn numbers(line: Option<String>, no: usize, what: &str, min: usize) -> Result<Vec<f64>> {
     let line = line.with_context(|| format!("the file is truncated: it ends before line {no} ({what})"))?;
     let v: Option<Vec<f64>> = line.split_ascii_whitespace().map(parse_number).collect();
     match v {
@@ -41,15 +60,16 @@ fn whole(v: f64, no: usize, what: &str) -> Result<i64> {
 
 /// Decode a cube file (already gunzipped).
 pub fn parse(bytes: &[u8], opts: &Options) -> Result<Loaded> {
-    let text = std::str::from_utf8(bytes)
-        .map_err(|e| anyhow!("not a text file: invalid UTF-8 at byte {}", e.valid_up_to()))?;
-    let mut lines = text.lines();
+    read_from(&mut Input::from_slice(bytes), opts)
+}
+
+fn read_from(input: &mut Input<'_>, opts: &Options) -> Result<Loaded> {
     let mut no = 2;
-    if lines.next().is_none() || lines.next().is_none() {
+    if line(input)?.is_none() || line(input)?.is_none() {
         bail!("the file is truncated: a cube file starts with two comment lines and five header lines");
     }
     no += 1;
-    let head = numbers(lines.next(), no, "`NATOMS X0 Y0 Z0 [NVAL]`", 4)?;
+    let head = numbers(line(input)?, no, "`NATOMS X0 Y0 Z0 [NVAL]`", 4)?;
     let natoms = whole(head[0], no, "NATOMS")?;
     let nval = match head.get(4) {
         Some(&v) => whole(v, no, "NVAL")?,
@@ -60,7 +80,7 @@ pub fn parse(bytes: &[u8], opts: &Options) -> Result<Loaded> {
     let mut angstrom = false;
     for i in 0..3 {
         no += 1;
-        let v = numbers(lines.next(), no, &format!("`N{} and axis vector {}`", i + 1, i + 1), 4)?;
+        let v = numbers(line(input)?, no, &format!("`N{} and axis vector {}`", i + 1, i + 1), 4)?;
         let count = whole(v[0], no, &format!("N{}", i + 1))?;
         if count == 0 || count.unsigned_abs() > 1 << 24 {
             bail!("line {no}: N{} is {count}; an axis needs 1 to 2^24 points", i + 1);
@@ -72,22 +92,31 @@ pub fn parse(bytes: &[u8], opts: &Options) -> Result<Loaded> {
     if natoms.unsigned_abs() > 1 << 24 {
         bail!("line 3: NATOMS is {natoms}, implausibly many");
     }
+    check_size(&n, Elem::F32, opts.max_bytes)?;
+    input.allow_text(
+        HEADER_TEXT + natoms.unsigned_abs() * ATOM_TEXT,
+        format!("a header of {} atoms takes", natoms.unsigned_abs()),
+    );
     for a in 0..natoms.unsigned_abs() {
         no += 1;
-        numbers(lines.next(), no, &format!("atom {} (`Z CHARGE X Y Z`)", a + 1), 5)?;
+        numbers(line(input)?, no, &format!("atom {} (`Z CHARGE X Y Z`)", a + 1), 5)?;
     }
-    let mut rest = lines.flat_map(str::split_ascii_whitespace);
+    let mut tok = String::new();
     let (per_point, orbitals) = if natoms < 0 {
         let what = "the orbital list after the atoms (NATOMS < 0)";
-        let m = rest
-            .next()
-            .and_then(parse_number)
+        let m = input
+            .token(&mut tok, false)?
+            .then(|| parse_number(&tok))
+            .flatten()
             .with_context(|| format!("the file ends or is garbled at {what}"))?;
         let m = whole(m, no + 1, "the number of orbitals")?;
         if !(1..=1 << 16).contains(&m) {
             bail!("{what} gives {m} orbitals");
         }
-        let list: Vec<String> = (0..m).map_while(|_| rest.next().map(str::to_string)).collect();
+        let mut list = Vec::new();
+        while (list.len() as i64) < m && input.token(&mut tok, false)? {
+            list.push(tok.clone());
+        }
         if list.len() as i64 != m {
             bail!("the file is truncated in {what}");
         }
@@ -104,15 +133,18 @@ pub fn parse(bytes: &[u8], opts: &Options) -> Result<Loaded> {
     let points = n[0].checked_mul(n[1]).and_then(|p| p.checked_mul(n[2])).context("the extents overflow")?;
     let count = points.checked_mul(per_point).context("the extents overflow")?;
     let what = format!("{}x{}x{} points of {per_point} value(s)", n[0], n[1], n[2]);
-    let Samples::F32(all) = super::parse_text(&mut rest, count, Elem::F32, &format!("values ({what})"))?
+    input.allow_text(
+        (count as u64).saturating_mul(TEXT_PER_VALUE).saturating_add(TEXT_SLACK),
+        format!("{count} values take"),
+    );
+    let values = format!("values ({what})");
+    let Samples::F32(picked) = parse_text(input, false, count, (opts.index, per_point), Elem::F32, &values)?
     else {
         bail!("internal: f32 text samples");
     };
-    if rest.next().is_some() {
+    if input.token(&mut tok, false)? {
         bail!("the file holds more values than {what}");
     }
-    let picked =
-        if per_point == 1 { all } else { all.into_iter().skip(opts.index).step_by(per_point).collect() };
     // File order: the third axis fastest, the first slowest.
     let (samples, dims) = permute(Samples::F32(picked), [n[2], n[1], n[0]], [2, 1, 0]);
     let len = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
@@ -201,7 +233,7 @@ mod tests {
     fn orbitals_are_picked_by_index() {
         let text = cube([3, 2, 5], &[11, 12], value);
         for (index, sign) in [(0, 1.0), (1, -1.0)] {
-            let l = parse(text.as_bytes(), &Options { index }).unwrap();
+            let l = parse(text.as_bytes(), &Options { index, ..Options::default() }).unwrap();
             let Samples::F32(v) = &l.volume.samples else { panic!() };
             assert_eq!(v[1 + 3 * (1 + 2 * 4)], sign * 114.0);
             let orbital = ["11", "12"][index];
@@ -211,7 +243,8 @@ mod tests {
                 l.notes
             );
         }
-        let e = format!("{:#}", parse(text.as_bytes(), &Options { index: 2 }).unwrap_err());
+        let e =
+            format!("{:#}", parse(text.as_bytes(), &Options { index: 2, ..Options::default() }).unwrap_err());
         assert!(e.contains("holds 2 value(s) per point; value 2 was asked for"), "{e}");
     }
 
@@ -234,7 +267,7 @@ mod tests {
             "",
             1,
         );
-        let l = parse(text.as_bytes(), &Options { index: 1 }).unwrap();
+        let l = parse(text.as_bytes(), &Options { index: 1, ..Options::default() }).unwrap();
         let Samples::F32(v) = &l.volume.samples else { panic!() };
         assert_eq!(v[7], -111.0);
         assert!(l.notes.iter().any(|n| n.contains("2 values; loaded value 1")), "{:?}", l.notes);

@@ -15,19 +15,19 @@
 //! The origin and start indices are not used.
 
 use super::{
-    Elem, Endian, Format, Loaded, Options, byte_len, decode, maybe_gunzip, permute, read_file, single_volume,
-    voxel_size,
+    Elem, Endian, Format, Input, Loaded, Options, check_size, decode, permute, single_volume, voxel_size,
 };
 use crate::volume::LoadedVolume;
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use std::path::Path;
 
 /// Size of the main header.
 pub const HEADER: usize = 1024;
 
-/// Read an MRC or CCP4 map (gzip compressed or not).
+/// Read an MRC or CCP4 map (gzip compressed or not): the header, then
+/// exactly the data it declares, streamed.
 pub fn read(path: &Path, opts: &Options) -> Result<Loaded> {
-    parse(&maybe_gunzip(read_file(path)?)?, opts)
+    read_from(&mut Input::open(path)?, opts)
 }
 
 /// A 4-byte word of the header.
@@ -81,10 +81,16 @@ fn byte_order(bytes: &[u8]) -> Result<Endian> {
 
 /// Decode an MRC or CCP4 map (already gunzipped).
 pub fn parse(bytes: &[u8], opts: &Options) -> Result<Loaded> {
+    read_from(&mut Input::from_slice(bytes), opts)
+}
+
+fn read_from(input: &mut Input<'_>, opts: &Options) -> Result<Loaded> {
     single_volume(opts)?;
+    let bytes = input.head(HEADER)?;
     if bytes.len() < HEADER {
         bail!("the file is truncated: an MRC/CCP4 header is {HEADER} bytes, the file has {}", bytes.len());
     }
+    let bytes = &bytes[..];
     let e = byte_order(bytes)?;
     let w = |i| word(bytes, i, e);
     let n = [w(0), w(1), w(2)];
@@ -116,30 +122,27 @@ pub fn parse(bytes: &[u8], opts: &Options) -> Result<Loaded> {
     };
     // `plausible` has checked the extents are 1 ..= 2^24.
     let n = n.map(|v| v as usize);
-    if nsymbt < 0 {
-        bail!("the extended header size NSYMBT is {nsymbt}; it must not be negative");
+    let ext = usize::try_from(nsymbt)
+        .with_context(|| format!("the extended header size NSYMBT is {nsymbt}; it must not be negative"))?;
+    if ext > opts.max_bytes {
+        bail!("the extended header size NSYMBT is {nsymbt}, more than the limit of {} bytes", opts.max_bytes);
     }
-    let offset = HEADER + nsymbt as usize;
-    if offset > bytes.len() {
-        bail!(
-            "the file is truncated: its extended header of {nsymbt} bytes (NSYMBT) ends past the end of the file ({} bytes)",
-            bytes.len()
-        );
-    }
-    let need = byte_len(&n, elem)?;
-    let have = bytes.len() - offset;
-    if have != need {
-        bail!(
-            "the header's extents {}x{}x{} of mode {mode} ({}) need {need} bytes of data from byte {offset}, but the \
-             file has {have}{}",
+    let need = check_size(&n, elem, opts.max_bytes)?;
+    input.data(ext).skip(ext as u64).with_context(|| {
+        format!("the file is truncated: its extended header of {nsymbt} bytes (NSYMBT) ends past the end of the file")
+    })?;
+    let offset = HEADER + ext;
+    let mut data = input.data(need);
+    let body = data.take(need).and_then(|b| data.finish().map(|()| b)).with_context(|| {
+        format!(
+            "the header's extents {}x{}x{} of mode {mode} ({}) need {need} bytes of data from byte {offset}",
             n[0],
             n[1],
             n[2],
-            elem.name(),
-            if have < need { " (truncated?)" } else { " (extents that do not match the file size)" }
-        );
-    }
-    let (samples, dims) = permute(decode(&bytes[offset..], elem, e), n, axis);
+            elem.name()
+        )
+    })?;
+    let (samples, dims) = permute(decode(body, elem, e), n, axis);
     let m = [w(7), w(8), w(9)];
     let spacing = [0, 1, 2].map(|i| {
         let cell = f64::from(real(bytes, 10 + i, e));
@@ -284,14 +287,20 @@ mod tests {
     fn bad_files_are_clear_errors() {
         let good = file([2, 2, 2], 2, [2; 3], [2.0; 3], [1, 2, 3], &[0; 80], 0x44, false, &[0; 32]);
         assert!(parse(&good, &Options::default()).is_ok());
-        let e = format!("{:#}", parse(&good, &Options { index: 1 }).unwrap_err());
+        let e = format!("{:#}", parse(&good, &Options { index: 1, ..Options::default() }).unwrap_err());
         assert!(e.contains("holds one volume; volume 1 was asked for"), "{e}");
         assert!(err(&good[..500]).contains("truncated: an MRC/CCP4 header is 1024 bytes, the file has 500"));
         let e = err(&good[..good.len() - 3]);
-        assert!(e.contains("2x2x2 of mode 2 (float32) need 32 bytes of data from byte 1104, but the file has 29 (truncated?)"), "{e}");
+        assert!(
+            e.contains(
+                "2x2x2 of mode 2 (float32) need 32 bytes of data from byte 1104: the data stop after 29 of 32 \
+                 bytes (truncated?)"
+            ),
+            "{e}"
+        );
         let mut long = good.clone();
         long.extend_from_slice(&[0; 4]);
-        assert!(err(&long).contains("do not match the file size"));
+        assert!(err(&long).contains("32 bytes of data expected, and 4 more follow"), "{}", err(&long));
         assert!(err(&good[..1050]).contains("extended header of 80 bytes"), "{}", err(&good[..1050]));
         let with = |i: usize, v: i32| {
             let mut b = good.clone();

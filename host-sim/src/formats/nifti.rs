@@ -13,7 +13,7 @@
 //! The orientation (qform, sform) is not applied: x is the file's first axis.
 
 use super::{
-    Elem, Endian, Format, Loaded, Options, byte_len, decode, maybe_gunzip, read_file, to_f32, voxel_size,
+    Data, Elem, Endian, Format, Input, Loaded, Options, byte_len, check_size, decode, to_f32, voxel_size,
 };
 use crate::volume::{Dims, LoadedVolume, Samples};
 use anyhow::{Context, Result, anyhow, bail};
@@ -36,10 +36,11 @@ pub fn sizeof_hdr_endian(bytes: &[u8]) -> Option<Endian> {
 }
 
 /// Read a `.nii` or `.nii.gz` file, or a `.hdr` (`.hdr.gz`) whose data are
-/// in the `.img` (`.img.gz`) beside it.
+/// in the `.img` (`.img.gz`) beside it: the header, then the data it
+/// declares, streamed (a gzip file is inflated as it is read).
 pub fn read(path: &Path, opts: &Options) -> Result<Loaded> {
-    let bytes = maybe_gunzip(read_file(path)?)?;
-    let h = header(&bytes)?;
+    let mut input = Input::open(path)?;
+    let h = header(&mut input)?;
     if &h.magic == b"ni1\0" {
         let img = image_path(path).with_context(|| {
             format!(
@@ -51,28 +52,23 @@ pub fn read(path: &Path, opts: &Options) -> Result<Loaded> {
                 }
             )
         })?;
-        let data = maybe_gunzip(read_file(&img)?)?;
-        let offset = offset(&h, &data, 0)?;
-        return volume(&h, &data, offset, opts)
+        return Input::open(&img)
+            .and_then(|mut data| volume(&h, &mut data, 0, opts))
             .with_context(|| format!("in the image file {}", img.display()));
     }
-    parse_header_and_data(&h, &bytes, opts)
+    volume(&h, &mut input, HEADER + 4, opts)
 }
 
 /// Decode a single-file NIfTI-1 (`.nii`, already gunzipped).
 pub fn parse(bytes: &[u8], opts: &Options) -> Result<Loaded> {
-    let h = header(bytes)?;
+    let mut input = Input::from_slice(bytes);
+    let h = header(&mut input)?;
     if &h.magic == b"ni1\0" {
         bail!(
             "the header's magic `ni1` says the data are in a separate .img file; open the .hdr file instead"
         );
     }
-    parse_header_and_data(&h, bytes, opts)
-}
-
-fn parse_header_and_data(h: &NiftiHeader, bytes: &[u8], opts: &Options) -> Result<Loaded> {
-    let offset = offset(h, bytes, HEADER + 4)?;
-    volume(h, bytes, offset, opts)
+    volume(&h, &mut input, HEADER + 4, opts)
 }
 
 /// The `.img` or `.img.gz` beside a `.hdr` or `.hdr.gz`, if there is one.
@@ -89,15 +85,16 @@ fn image_path(hdr: &Path) -> Option<PathBuf> {
     ["img", "img.gz", "IMG", "IMG.GZ"]
         .iter()
         .map(|e| hdr.with_file_name(format!("{stem}.{e}")))
-        .find(|p| p.is_file())
+        .find(|p| p.exists())
 }
 
-/// Parse and check the 348-byte header.
-fn header(bytes: &[u8]) -> Result<NiftiHeader> {
+/// Read, parse and check the 348-byte header.
+fn header(input: &mut Input<'_>) -> Result<NiftiHeader> {
+    let bytes = input.head(HEADER)?;
     if bytes.len() < HEADER {
         bail!("the file is truncated: a NIfTI-1 header is {HEADER} bytes, the file has {}", bytes.len());
     }
-    let Some(order) = sizeof_hdr_endian(bytes) else {
+    let Some(order) = sizeof_hdr_endian(&bytes) else {
         let w = [bytes[0], bytes[1], bytes[2], bytes[3]];
         let (le, be) = (i32::from_le_bytes(w), i32::from_be_bytes(w));
         if le == 540 || be == 540 {
@@ -105,7 +102,7 @@ fn header(bytes: &[u8]) -> Result<NiftiHeader> {
         }
         bail!("not a NIfTI-1 file: sizeof_hdr reads {le} (little-endian) or {be} (big-endian), not {HEADER}");
     };
-    let h = NiftiHeader::from_reader(&bytes[..HEADER]).map_err(|e| match e {
+    let h = NiftiHeader::from_reader(&bytes[..]).map_err(|e| match e {
         NiftiError::InvalidFormat => anyhow!(
             "not a NIfTI-1 file: the magic at byte 344 is {:?}, not \"n+1\" or \"ni1\" (an Analyze 7.5 header?)",
             String::from_utf8_lossy(&bytes[344..348])
@@ -129,14 +126,21 @@ fn header(bytes: &[u8]) -> Result<NiftiHeader> {
     Ok(h)
 }
 
-/// Where the data start: `vox_offset` (at least `min`, the end of the
-/// header and extension flag, in a single file).
-fn offset(h: &NiftiHeader, bytes: &[u8], min: usize) -> Result<usize> {
+/// Where the data start: `vox_offset`, at least `min` (the end of the
+/// header and extension flag, in a single file), at most `max_bytes` past
+/// it (extensions larger than a volume are refused, not read through).
+fn offset(h: &NiftiHeader, min: usize, max_bytes: usize) -> Result<usize> {
     let v = h.vox_offset;
-    if !v.is_finite() || v < 0.0 || v.fract() != 0.0 || v > bytes.len() as f32 {
-        bail!("the header's vox_offset {v} is not a byte offset within the file ({} bytes)", bytes.len());
+    if !v.is_finite() || v < 0.0 || v.fract() != 0.0 {
+        bail!("the header's vox_offset {v} is not a byte offset");
     }
-    Ok((v as usize).max(min).min(bytes.len()))
+    let at = (v as usize).max(min);
+    if at - min > max_bytes {
+        bail!(
+            "the header's vox_offset {v} puts the data more than the limit of {max_bytes} bytes past the header"
+        );
+    }
+    Ok(at)
 }
 
 /// The sample type of a NIfTI data type.
@@ -160,8 +164,12 @@ fn elem(t: NiftiType) -> Result<Elem> {
     })
 }
 
-/// Decode volume `opts.index` from `bytes[offset..]`.
-fn volume(h: &NiftiHeader, bytes: &[u8], offset: usize, opts: &Options) -> Result<Loaded> {
+/// Read volume `opts.index` from `input`, which has given the header and
+/// holds the data from byte `vox_offset` (at least `min`). The volumes
+/// before it are passed over; those after it too, and then nothing may
+/// follow, when all the data fit within [`Options::max_bytes`]; otherwise
+/// they are left unread.
+fn volume(h: &NiftiHeader, input: &mut Input<'_>, min: usize, opts: &Options) -> Result<Loaded> {
     let t = h
         .data_type()
         .map_err(|_| anyhow!("the header's datatype {} is not a NIfTI-1 data type", h.datatype))?;
@@ -173,28 +181,36 @@ fn volume(h: &NiftiHeader, bytes: &[u8], offset: usize, opts: &Options) -> Resul
     let need = byte_len(&all, elem)?;
     // No overflow: `need` did not.
     let frames: usize = (4..=7).map(ext).product();
-    let have = bytes.len() - offset;
     let shape = all.iter().map(|d| d.to_string()).collect::<Vec<_>>().join("x");
-    if have != need {
-        bail!(
-            "the header's extents {shape} of {} need {need} bytes of data from byte {offset}, but the file has {have}{}",
-            elem.name(),
-            if have < need { " (truncated?)" } else { " (extents that do not match the file size)" }
-        );
-    }
     if opts.index >= frames {
         bail!("the file holds {frames} volume(s) of {nx}x{ny}x{nz}; volume {} was asked for", opts.index);
     }
-    let one = byte_len(&[nx, ny, nz], elem)?;
-    let start = offset + opts.index * one;
+    let (slope, inter) = (h.scl_slope, h.scl_inter);
+    let scaled = slope.is_finite() && slope != 0.0 && (slope != 1.0 || (inter.is_finite() && inter != 0.0));
+    let one = check_size(&[nx, ny, nz], elem, opts.max_bytes)?;
+    if scaled {
+        check_size(&[nx, ny, nz], Elem::F32, opts.max_bytes)?;
+    }
+    let offset = offset(h, min, opts.max_bytes)?;
+    let gap = offset.saturating_sub(usize::try_from(input.pos()).unwrap_or(usize::MAX));
+    input
+        .data(gap)
+        .skip(gap as u64)
+        .with_context(|| format!("the header's vox_offset {} is past the end of the file", h.vox_offset))?;
+    let mut data = input.data(need);
+    let bytes = take_volume(&mut data, opts.index, one, need <= opts.max_bytes).with_context(|| {
+        format!(
+            "the header's extents {shape} of {} need {need} bytes of data from byte {offset}",
+            elem.name()
+        )
+    })?;
     let endian = if h.endianness == nifti::Endianness::Little { Endian::Little } else { Endian::Big };
-    let mut samples = decode(&bytes[start..start + one], elem, endian);
+    let mut samples = decode(bytes, elem, endian);
     let mut notes: Vec<String> = elem.note().into_iter().collect();
     if frames > 1 {
         notes.push(format!("the file holds {frames} volumes ({shape}); loaded volume {}", opts.index));
     }
-    let (slope, inter) = (h.scl_slope, h.scl_inter);
-    if slope.is_finite() && slope != 0.0 && (slope != 1.0 || (inter.is_finite() && inter != 0.0)) {
+    if scaled {
         let inter = if inter.is_finite() { inter } else { 0.0 };
         samples = Samples::F32(to_f32(samples).into_iter().map(|v| v * slope + inter).collect());
         notes.push(format!("scaled by scl_slope {slope} and scl_inter {inter} into f32"));
@@ -205,6 +221,18 @@ fn volume(h: &NiftiHeader, bytes: &[u8], offset: usize, opts: &Options) -> Resul
         format: Format::Nifti,
         notes,
     })
+}
+
+/// Volume `index` of `one` bytes from `data`; then, if `whole`, the rest
+/// passed over and checked to be all.
+fn take_volume(data: &mut Data<'_, '_>, index: usize, one: usize, whole: bool) -> Result<Vec<u8>> {
+    // No overflow: index < frames, and frames * one did not.
+    data.skip((index * one) as u64)?;
+    let bytes = data.take(one)?;
+    if whole {
+        data.finish()?;
+    }
+    Ok(bytes)
 }
 
 #[cfg(test)]
@@ -308,10 +336,37 @@ pub(crate) mod tests {
         let l = parse(&f, &Options::default()).unwrap();
         assert_eq!(l.volume.samples, Samples::I16(vec![1, 2]));
         assert!(l.notes.iter().any(|n| n.contains("3 volumes")), "{:?}", l.notes);
-        let l = parse(&f, &Options { index: 2 }).unwrap();
+        let l = parse(&f, &Options { index: 2, ..Options::default() }).unwrap();
         assert_eq!(l.volume.samples, Samples::I16(vec![5, 6]));
-        let e = format!("{:#}", parse(&f, &Options { index: 3 }).unwrap_err());
+        let e = format!("{:#}", parse(&f, &Options { index: 3, ..Options::default() }).unwrap_err());
         assert!(e.contains("holds 3 volume(s) of 2x1x1; volume 3 was asked for"), "{e}");
+    }
+
+    /// A 4D file larger than the limit: its volumes load one at a time,
+    /// and the volumes after the one taken are not read (here, they are
+    /// cut short); within the limit, the whole file is checked.
+    #[test]
+    fn four_dimensions_over_the_limit_read_only_the_volume_taken() {
+        let v = le16(&[1, 2, 3, 4, 5, 6]);
+        let f = file(&[2, 1, 1, 3], 4, 16, [1.0; 3], (0.0, 0.0), b"n+1\0", false, &v[..9]);
+        let small = |index| Options { index, max_bytes: 4 };
+        assert_eq!(parse(&f, &small(0)).unwrap().volume.samples, Samples::I16(vec![1, 2]));
+        assert_eq!(parse(&f, &small(1)).unwrap().volume.samples, Samples::I16(vec![3, 4]));
+        let e = format!("{:#}", parse(&f, &small(2)).unwrap_err());
+        assert!(e.contains("the data stop after 9 of 12 bytes (truncated?)"), "{e}");
+        let e = format!("{:#}", parse(&f, &Options::default()).unwrap_err());
+        assert!(e.contains("the data stop after 9 of 12 bytes (truncated?)"), "{e}");
+        let e = format!("{:#}", parse(&f, &Options { index: 0, max_bytes: 3 }).unwrap_err());
+        assert!(e.contains("2x1x1 int16 samples take 4 bytes, more than the limit of 3 bytes"), "{e}");
+        // Scaled to f32: the loaded size counts.
+        let f = file(&[2, 1, 1], 4, 16, [1.0; 3], (2.0, 0.0), b"n+1\0", false, &v[..4]);
+        let e = format!("{:#}", parse(&f, &Options { index: 0, max_bytes: 7 }).unwrap_err());
+        assert!(e.contains("2x1x1 float32 samples take 8 bytes"), "{e}");
+        // Extensions larger than the limit before the data are not read through.
+        let mut f = file(&[2, 1, 1], 4, 16, [1.0; 3], (0.0, 0.0), b"n+1\0", false, &v[..4]);
+        f[108..112].copy_from_slice(&1e6f32.to_le_bytes());
+        let e = format!("{:#}", parse(&f, &Options { index: 0, max_bytes: 1000 }).unwrap_err());
+        assert!(e.contains("vox_offset 1000000 puts the data more than the limit of 1000 bytes"), "{e}");
     }
 
     #[test]
@@ -321,13 +376,14 @@ pub(crate) mod tests {
         let e = err(&good[..good.len() - 1]);
         assert!(
             e.contains(
-                "2x2x2 of int16 need 16 bytes of data from byte 352, but the file has 15 (truncated?)"
+                "2x2x2 of int16 need 16 bytes of data from byte 352: the data stop after 15 of 16 bytes \
+                 (truncated?)"
             ),
             "{e}"
         );
         let mut long = good.clone();
         long.push(0);
-        assert!(err(&long).contains("do not match the file size"), "{}", err(&long));
+        assert!(err(&long).contains("16 bytes of data expected, and 1 more follow"), "{}", err(&long));
         let mut bad = good.clone();
         bad[0] = 7;
         assert!(err(&bad).contains("not a NIfTI-1 file: sizeof_hdr reads"), "{}", err(&bad));

@@ -13,8 +13,14 @@
 //! `long`, `unsigned_long`, `vtktypeint64`, `vtktypeuint64`, `vtkIdType`
 //! (written as 4-byte int) and `double` as `f32` with a note.
 
+//!
+//! The file is read in order, keyword lines, then each array's data, up to
+//! the chosen array and no further (the arrays after it are left unread);
+//! ASCII data at most 64 bytes of text a value.
+
 use super::{
-    Elem, Endian, Format, Loaded, Options, decode, maybe_gunzip, parse_text, read_file, text, voxel_size,
+    Elem, Endian, Format, HEADER_TEXT, Input, Loaded, Options, TEXT_PER_VALUE, check_size, decode,
+    parse_text, text, voxel_size,
 };
 use crate::volume::{Dims, LoadedVolume, Samples};
 use anyhow::{Context, Result, bail};
@@ -22,61 +28,11 @@ use std::path::Path;
 
 /// Read a VTK legacy file (gzip compressed or not).
 pub fn read(path: &Path, opts: &Options) -> Result<Loaded> {
-    parse(&maybe_gunzip(read_file(path)?)?, opts)
+    read_from(&mut Input::open(path)?, opts)
 }
 
-/// A position in the file: lines of keywords, then ASCII tokens or raw
-/// binary bytes.
-struct Cursor<'a> {
-    b: &'a [u8],
-    pos: usize,
-}
-
-impl<'a> Cursor<'a> {
-    /// 1-based line number of the current position.
-    fn line_no(&self) -> usize {
-        1 + self.b[..self.pos].iter().filter(|&&c| c == b'\n').count()
-    }
-
-    /// The rest of the current line (without its end), moving past it.
-    fn line(&mut self) -> Option<&'a [u8]> {
-        if self.pos >= self.b.len() {
-            return None;
-        }
-        let rest = &self.b[self.pos..];
-        let end = rest.iter().position(|&c| c == b'\n').unwrap_or(rest.len());
-        self.pos += (end + 1).min(rest.len());
-        let line = &rest[..end];
-        Some(line.strip_suffix(b"\r").unwrap_or(line))
-    }
-
-    /// The next line that is not blank, trimmed.
-    fn keyword_line(&mut self) -> Option<String> {
-        loop {
-            let l = text(self.line()?);
-            if !l.is_empty() {
-                return Some(l);
-            }
-        }
-    }
-
-    /// The next whitespace-separated token.
-    fn token(&mut self) -> Option<&'a str> {
-        let rest = &self.b[self.pos..];
-        let start = rest.iter().position(|c| !c.is_ascii_whitespace())?;
-        let len = rest[start..].iter().position(|c| c.is_ascii_whitespace()).unwrap_or(rest.len() - start);
-        self.pos += start + len;
-        Some(std::str::from_utf8(&rest[start..start + len]).unwrap_or("\u{fffd}"))
-    }
-
-    /// The next `n` bytes.
-    fn bytes(&mut self, n: usize) -> Option<&'a [u8]> {
-        let end = self.pos.checked_add(n).filter(|&e| e <= self.b.len())?;
-        let s = &self.b[self.pos..end];
-        self.pos = end;
-        Some(s)
-    }
-}
+/// Arrays not taken that an error lists, at most.
+const LISTED: usize = 32;
 
 /// A VTK data type: a sample type, or packed bits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -150,50 +106,93 @@ struct Arrays {
 
 impl Arrays {
     /// Take `a` if it is the chosen candidate (`usable` gives its element
-    /// type and point count when it is a one-component point array),
+    /// type and the grid when it is a one-component point array),
     /// otherwise skip its data.
     fn offer(
         &mut self,
-        r: &mut Reader<'_>,
+        r: &mut Reader<'_, '_>,
         section: Section,
         a: Array,
-        usable: Option<(Elem, usize)>,
+        usable: Option<(Elem, [usize; 3])>,
     ) -> Result<()> {
         match usable {
-            Some((e, n)) => {
+            Some((e, dims)) => {
                 if self.candidates.len() == self.index {
-                    self.found = Some((a.name.clone(), e, r.values(n, e, &a.what)?));
+                    check_size(&dims, e, r.max_bytes)?;
+                    self.found = Some((a.name.clone(), e, r.values(dims.iter().product(), e, &a.what)?));
                 } else {
                     r.skip(a.total, a.ty, &a.what)?;
                 }
                 self.candidates.push(a.name);
             }
             None => {
-                self.others.push(describe(section, &a.name, a.comps));
+                self.other(describe(section, &a.name, a.comps));
                 r.skip(a.total, a.ty, &a.what)?;
             }
         }
         Ok(())
     }
+
+    /// Note an array that is not a candidate.
+    fn other(&mut self, what: String) {
+        if self.others.len() < LISTED {
+            self.others.push(what);
+        }
+    }
 }
 
-struct Reader<'a> {
-    c: Cursor<'a>,
+struct Reader<'i, 'a> {
+    input: &'i mut Input<'a>,
     binary: bool,
+    max_bytes: usize,
 }
 
-impl<'a> Reader<'a> {
+impl Reader<'_, '_> {
+    /// The next line that is not blank, trimmed.
+    fn keyword_line(&mut self) -> Result<Option<String>> {
+        while let Some(l) = self.input.line()? {
+            let l = text(&l);
+            if !l.is_empty() {
+                return Ok(Some(l));
+            }
+        }
+        Ok(None)
+    }
+
+    /// Whether the next line that is not blank starts with LOOKUP_TABLE
+    /// (without taking it: if not, the data start there).
+    fn lookup_table_follows(&mut self) -> Result<bool> {
+        const KEY: &[u8] = b"LOOKUP_TABLE";
+        let head = self.input.peek(256)?;
+        let Some(at) = head.iter().position(|c| !c.is_ascii_whitespace()) else { return Ok(false) };
+        Ok(head.get(at..at + KEY.len()).is_some_and(|w| w.eq_ignore_ascii_case(KEY))
+            && head.get(at + KEY.len()).is_none_or(|c| c.is_ascii_whitespace()))
+    }
+
+    /// Allow the text of `count` values (ASCII), and a header's worth of
+    /// keyword lines after them.
+    fn allow(&mut self, count: usize) {
+        let values = if self.binary { 0 } else { count as u64 };
+        self.input.allow_text(
+            values.saturating_mul(TEXT_PER_VALUE).saturating_add(HEADER_TEXT),
+            format!("{values} values and keyword lines take"),
+        );
+    }
+
     /// Skip `count` values of type `ty` (what names them in errors).
     fn skip(&mut self, count: usize, ty: Ty, what: &str) -> Result<()> {
+        self.allow(count);
         if self.binary {
             let n = match ty {
                 Ty::Bit => count.div_ceil(8),
                 Ty::Elem(e) => count.checked_mul(e.size()).context("the extents overflow")?,
             };
-            self.binary_bytes(n, what)?;
+            let at = self.input.pos();
+            self.input.data(n).skip(n as u64).with_context(|| truncated(what, n, at))?;
         } else {
+            let mut tok = String::new();
             for i in 0..count {
-                if self.c.token().is_none() {
+                if !self.input.token(&mut tok, false)? {
                     bail!("the file is truncated in {what}: {i} of {count} values");
                 }
             }
@@ -201,35 +200,33 @@ impl<'a> Reader<'a> {
         Ok(())
     }
 
-    fn binary_bytes(&mut self, n: usize, what: &str) -> Result<&'a [u8]> {
-        let (at, len) = (self.c.pos, self.c.b.len());
-        self.c.bytes(n).with_context(|| {
-            format!(
-                "the file is truncated in {what}: {n} bytes of binary data from byte {at}, the file has {}",
-                len - at
-            )
-        })
-    }
-
     /// Read `count` values of `elem`.
     fn values(&mut self, count: usize, elem: Elem, what: &str) -> Result<Samples> {
+        self.allow(count);
         if self.binary {
             let n = count.checked_mul(elem.size()).context("the extents overflow")?;
-            Ok(decode(self.binary_bytes(n, what)?, elem, Endian::Big))
+            let at = self.input.pos();
+            let bytes = self.input.data(n).take(n).with_context(|| truncated(what, n, at))?;
+            Ok(decode(bytes, elem, Endian::Big))
         } else {
-            let mut tokens = std::iter::from_fn(|| self.c.token());
-            parse_text(&mut tokens, count, elem, what)
+            parse_text(self.input, false, count, (0, 1), elem, what)
         }
     }
 
     /// Skip a `METADATA` block: lines up to a blank one.
-    fn skip_metadata(&mut self) {
-        while let Some(l) = self.c.line() {
-            if text(l).is_empty() {
+    fn skip_metadata(&mut self) -> Result<()> {
+        while let Some(l) = self.input.line()? {
+            if text(&l).is_empty() {
                 break;
             }
         }
+        Ok(())
     }
+}
+
+/// The error context of binary data cut short.
+fn truncated(what: &str, n: usize, at: u64) -> String {
+    format!("the file is truncated in {what}: {n} bytes of binary data from byte {at}")
 }
 
 /// Words of a keyword line, checked for a count.
@@ -247,22 +244,29 @@ fn count(word: &str, line: &str) -> Result<usize> {
 
 /// Decode a VTK legacy file (already gunzipped).
 pub fn parse(bytes: &[u8], opts: &Options) -> Result<Loaded> {
-    let mut c = Cursor { b: bytes, pos: 0 };
-    let first = text(c.line().unwrap_or_default());
+    read_from(&mut Input::from_slice(bytes), opts)
+}
+
+fn read_from(input: &mut Input<'_>, opts: &Options) -> Result<Loaded> {
+    let head = input.peek(256)?;
+    let first = text(head.split(|&c| c == b'\n').next().unwrap_or_default());
     if !first.starts_with("# vtk DataFile Version") {
         bail!(
             "not a VTK legacy file: the first line is `{}`, not `# vtk DataFile Version ...`",
             first.chars().take(60).collect::<String>()
         );
     }
-    let _title = c.line().context("the file is truncated after its first line")?;
-    let mode = c.keyword_line().context("the file is truncated: no ASCII or BINARY line")?;
-    let binary = match mode.to_ascii_uppercase().as_str() {
+    input.line()?;
+    let _title = input.line()?.context("the file is truncated after its first line")?;
+    let mut r = Reader { input, binary: false, max_bytes: opts.max_bytes };
+    let mode = r.keyword_line()?.context("the file is truncated: no ASCII or BINARY line")?;
+    r.binary = match mode.to_ascii_uppercase().as_str() {
         "ASCII" => false,
         "BINARY" => true,
         _ => bail!("line 3 should be ASCII or BINARY, not `{mode}`"),
     };
-    let dataset = c.keyword_line().context("the file is truncated: no DATASET line")?;
+    let binary = r.binary;
+    let dataset = r.keyword_line()?.context("the file is truncated: no DATASET line")?;
     let ds = words(&dataset, 2, "DATASET STRUCTURED_POINTS")?;
     if !ds[0].eq_ignore_ascii_case("DATASET") {
         bail!("expected `DATASET STRUCTURED_POINTS`, found `{dataset}`");
@@ -270,22 +274,21 @@ pub fn parse(bytes: &[u8], opts: &Options) -> Result<Loaded> {
     if !ds[1].eq_ignore_ascii_case("STRUCTURED_POINTS") {
         bail!("the dataset is {}, which is not supported: only STRUCTURED_POINTS", ds[1]);
     }
-    let mut r = Reader { c, binary };
     let mut dims: Option<[usize; 3]> = None;
     let mut spacing = [1.0f32; 3];
     let mut section = Section::None;
     let mut seen = Arrays { index: opts.index, candidates: Vec::new(), others: Vec::new(), found: None };
     let points = |dims: Option<[usize; 3]>| dims.map(|d| d[0] * d[1] * d[2]);
     while seen.found.is_none() {
-        let Some(line) = r.c.keyword_line() else { break };
-        let at = r.c.line_no() - 1;
+        let Some(line) = r.keyword_line()? else { break };
+        let at = r.input.line_no() - 1;
         let w = words(&line, 1, "a keyword")?;
         let n_here = match section {
             Section::Point(n) | Section::Cell(n) => n,
             Section::None => 0,
         };
         // A keyword line that the end of the file cuts short is a truncation.
-        let cut = r.c.pos >= bytes.len() && !bytes.ends_with(b"\n");
+        let cut = r.input.line_was_cut();
         let mut step = || -> Result<()> {
             match w[0].to_ascii_uppercase().as_str() {
                 "DIMENSIONS" => {
@@ -337,21 +340,16 @@ pub fn parse(bytes: &[u8], opts: &Options) -> Result<Loaded> {
                     };
                     let name = unescape(w[1]);
                     // An optional LOOKUP_TABLE line follows.
-                    let mark = r.c.pos;
-                    match r.c.keyword_line() {
-                        Some(l)
-                            if l.split_ascii_whitespace()
-                                .next()
-                                .is_some_and(|k| k.eq_ignore_ascii_case("LOOKUP_TABLE")) => {}
-                        _ => r.c.pos = mark,
+                    if r.lookup_table_follows()? {
+                        r.keyword_line()?;
                     }
                     let what = format!("SCALARS `{name}` (line {at})");
                     let total = n_here.checked_mul(comps).context("the extents overflow")?;
                     if section == Section::None {
                         bail!("line {at}: SCALARS outside POINT_DATA or CELL_DATA");
                     }
-                    let usable = match (section, ty) {
-                        (Section::Point(_), Ty::Elem(e)) if comps == 1 => Some((e, n_here)),
+                    let usable = match (section, ty, dims) {
+                        (Section::Point(_), Ty::Elem(e), Some(d)) if comps == 1 => Some((e, d)),
                         _ => None,
                     };
                     seen.offer(&mut r, section, Array { name, comps, ty, total, what }, usable)?;
@@ -361,11 +359,11 @@ pub fn parse(bytes: &[u8], opts: &Options) -> Result<Loaded> {
                     let arrays = count(w[2], &line)?;
                     let mut i = 0;
                     while i < arrays && seen.found.is_none() {
-                        let l =
-                            r.c.keyword_line()
-                                .with_context(|| format!("the file is truncated in FIELD `{}`", w[1]))?;
+                        let l = r
+                            .keyword_line()?
+                            .with_context(|| format!("the file is truncated in FIELD `{}`", w[1]))?;
                         if l.eq_ignore_ascii_case("METADATA") {
-                            r.skip_metadata();
+                            r.skip_metadata()?;
                             continue;
                         }
                         let a = words(&l, 4, "NAME COMPONENTS TUPLES TYPE")?;
@@ -374,15 +372,17 @@ pub fn parse(bytes: &[u8], opts: &Options) -> Result<Loaded> {
                         let name = unescape(a[0]);
                         let what = format!("FIELD array `{name}`");
                         let total = comps.checked_mul(tuples).context("the extents overflow")?;
-                        let usable = match (section, ty) {
-                            (Section::Point(n), Ty::Elem(e)) if comps == 1 && tuples == n => Some((e, n)),
+                        let usable = match (section, ty, dims) {
+                            (Section::Point(n), Ty::Elem(e), Some(d)) if comps == 1 && tuples == n => {
+                                Some((e, d))
+                            }
                             _ => None,
                         };
                         seen.offer(&mut r, section, Array { name, comps, ty, total, what }, usable)?;
                         i += 1;
                     }
                 }
-                "METADATA" => r.skip_metadata(),
+                "METADATA" => r.skip_metadata()?,
                 "LOOKUP_TABLE" => {
                     let w = words(&line, 3, "LOOKUP_TABLE NAME SIZE")?;
                     let size = count(w[2], &line)?;
@@ -421,7 +421,7 @@ pub fn parse(bytes: &[u8], opts: &Options) -> Result<Loaded> {
                         }
                     };
                     let ty = data_type(ty_word).with_context(|| format!("line {at}"))?;
-                    seen.others.push(describe(section, &unescape(w.get(1).copied().unwrap_or("")), per));
+                    seen.other(describe(section, &unescape(w.get(1).copied().unwrap_or("")), per));
                     let n = n_here.checked_mul(per).context("the extents overflow")?;
                     r.skip(n, ty, &format!("{k} (line {at})"))?;
                 }
@@ -513,11 +513,14 @@ ignored 2 1 int
         assert_eq!(l.volume.samples, Samples::I16(vec![0, 1, 2, 10, 11, 12, 100, 101, 102, 110, 111, -112]));
         assert_eq!(l.notes, ["loaded point data `density`"]);
         // The second one-component point array is the FIELD's `extra`.
-        let l = parse(ASCII.as_bytes(), &Options { index: 1 }).unwrap();
+        let l = parse(ASCII.as_bytes(), &Options { index: 1, ..Options::default() }).unwrap();
         let Samples::F32(v) = &l.volume.samples else { panic!() };
         assert_eq!(v[11], 0.5);
         assert!(l.notes[0].contains("float64"));
-        let e = format!("{:#}", parse(ASCII.as_bytes(), &Options { index: 2 }).unwrap_err());
+        let e = format!(
+            "{:#}",
+            parse(ASCII.as_bytes(), &Options { index: 2, ..Options::default() }).unwrap_err()
+        );
         assert!(e.contains("holds 2 one-component POINT_DATA array(s) (density, extra); array 2"), "{e}");
     }
 
@@ -573,6 +576,33 @@ ignored 2 1 int
             parse(&binary("double", &d, 2), &Options::default()).unwrap().volume.samples,
             Samples::F32(vec![3.25, 1e-3])
         );
+    }
+
+    /// Only what is needed is read: arrays after the one taken are not,
+    /// text stops at what the arrays declare, and the limit is checked
+    /// before the chosen array is read.
+    #[test]
+    fn reads_up_to_the_array_taken() {
+        // After `density`: a FIELD array cut short, never read.
+        let cut = &ASCII[..ASCII.find("0 0 0 0 0 0 0 0 0 0 0 .5").unwrap() + 5];
+        assert!(parse(cut.as_bytes(), &Options::default()).is_ok());
+        // Blanks without end in ASCII data (an array's values and a
+        // header's worth of keyword lines may follow).
+        let blanks = ASCII.replace("0 1 2 10 11 12", &format!("0 1 2 10 11{} 12", " ".repeat(5 << 20)));
+        let e = err(blanks.as_bytes());
+        assert!(
+            e.contains("text runs on for more than")
+                && e.contains("more than 12 values and keyword lines take"),
+            "{e}"
+        );
+        let e = format!("{:#}", parse(ASCII.as_bytes(), &Options { index: 0, max_bytes: 23 }).unwrap_err());
+        assert!(e.contains("3x2x2 int16 samples take 24 bytes, more than the limit of 23 bytes"), "{e}");
+        assert!(parse(ASCII.as_bytes(), &Options { index: 0, max_bytes: 24 }).is_ok());
+        // Binary data right after SCALARS, without a LOOKUP_TABLE line.
+        let f = binary("unsigned_char", b"LOO", 3);
+        let no_table = String::from_utf8_lossy(&f).replace("LOOKUP_TABLE default\n", "");
+        let l = parse(no_table.as_bytes(), &Options::default()).unwrap();
+        assert_eq!(l.volume.samples, Samples::U8(b"LOO".to_vec()));
     }
 
     #[test]
