@@ -28,12 +28,24 @@ pub struct Summary {
     pub suggested: Vec<f32>,
 }
 
-fn values(v: &LoadedVolume) -> (&'static str, Vec<f32>) {
+/// The sample type's name.
+fn dtype(v: &LoadedVolume) -> &'static str {
     match &v.samples {
-        Samples::U8(s) => ("u8", s.iter().map(|&x| f32::from(x)).collect()),
-        Samples::U16(s) => ("u16", s.iter().map(|&x| f32::from(x)).collect()),
-        Samples::I16(s) => ("i16", s.iter().map(|&x| f32::from(x)).collect()),
-        Samples::F32(s) => ("f32", s.clone()),
+        Samples::U8(_) => "u8",
+        Samples::U16(_) => "u16",
+        Samples::I16(_) => "i16",
+        Samples::F32(_) => "f32",
+    }
+}
+
+/// `f` of every finite sample, as `f32`, in place: no copy of the volume
+/// (a volume at the readers' memory limit has no room for one).
+fn each_finite(v: &LoadedVolume, mut f: impl FnMut(f32)) {
+    match &v.samples {
+        Samples::U8(s) => s.iter().for_each(|&x| f(f32::from(x))),
+        Samples::U16(s) => s.iter().for_each(|&x| f(f32::from(x))),
+        Samples::I16(s) => s.iter().for_each(|&x| f(f32::from(x))),
+        Samples::F32(s) => s.iter().filter(|x| x.is_finite()).for_each(|&x| f(x)),
     }
 }
 
@@ -69,26 +81,26 @@ fn otsu(hist: &[u64], from: usize, lo: f64, hi: f64) -> Option<f32> {
 /// Summarise a volume with a histogram of `bins` bins.
 pub fn summarize(v: &LoadedVolume, bins: usize) -> Summary {
     let bins = bins.max(2);
-    let (dtype, vals) = values(v);
-    let finite: Vec<f32> = vals.iter().copied().filter(|x| x.is_finite()).collect();
-    let range = finite.iter().fold(None, |r: Option<(f32, f32)>, &x| match r {
-        None => Some((x, x)),
-        Some((a, b)) => Some((a.min(x), b.max(x))),
+    // One pass for the range and the mean (summed in f64: a sum of f32
+    // samples may pass the f32 range), one for the histogram.
+    let (mut range, mut sum, mut finite) = (None::<(f32, f32)>, 0.0f64, 0usize);
+    each_finite(v, |x| {
+        range = Some(range.map_or((x, x), |(a, b)| (a.min(x), b.max(x))));
+        sum += f64::from(x);
+        finite += 1;
     });
-    // Summed in f64 (a sum of f32 samples may pass the f32 range).
-    let mean =
-        (!finite.is_empty()).then(|| finite.iter().map(|&x| f64::from(x)).sum::<f64>() / finite.len() as f64);
+    let mean = (finite > 0).then(|| sum / finite as f64);
     let mut histogram = vec![0u64; bins];
     let mut suggested = vec![];
     if let Some((lo, hi)) = range.map(|(a, b)| (f64::from(a), f64::from(b)))
         && hi > lo
     {
         let bin = |x: f64| ((((x - lo) / (hi - lo)) * bins as f64) as usize).min(bins - 1);
-        for &x in &finite {
+        each_finite(v, |x| {
             if let Some(c) = histogram.get_mut(bin(f64::from(x))) {
                 *c += 1;
             }
-        }
+        });
         if let Some(t) = otsu(&histogram, 0, lo, hi) {
             suggested.push(t);
             let from = (((f64::from(t) - lo) / (hi - lo)) * bins as f64).round() as usize;
@@ -100,10 +112,10 @@ pub fn summarize(v: &LoadedVolume, bins: usize) -> Summary {
     let d = v.dims;
     Summary {
         dims: (d.0, d.1, d.2),
-        dtype,
+        dtype: dtype(v),
         spacing: v.spacing,
-        finite: finite.len(),
-        nonfinite: vals.len() - finite.len(),
+        finite,
+        nonfinite: v.dims.count().unwrap_or(finite).saturating_sub(finite),
         range,
         mean,
         histogram,

@@ -380,9 +380,10 @@ struct Source {
     volume_index: usize,
     /// The most memory a volume's samples may take, in MiB (2^20 bytes), in
     /// the file's sample type or as loaded: a file whose header (or
-    /// --dims and --dtype) asks for more is refused before its samples are
-    /// read. 1 to 16777216 (the default, 2048, is 2 GiB).
-    #[arg(long, value_name = "MB", requires = "input",
+    /// --dims and --dtype) asks for more, or a larger demo, is refused
+    /// before its samples are read or made. 1 to 16777216 (the default,
+    /// 2048, is 2 GiB).
+    #[arg(long, value_name = "MB",
           default_value_t = isoscope_sim::formats::DEFAULT_MAX_BYTES >> 20,
           value_parser = in_range::<1, 16_777_216, usize>)]
     max_volume_mb: usize,
@@ -486,11 +487,11 @@ fn parse_level(s: &str) -> Result<f32, String> {
 }
 
 fn load(source: &Source) -> Result<(LoadedVolume, Option<DemoSpec>)> {
+    // No overflow below 16 TiB on a 64-bit machine; a 32-bit one cannot
+    // hold more than `usize::MAX` anyway.
+    let max_bytes = source.max_volume_mb.saturating_mul(1 << 20);
     match (&source.input, source.demo) {
         (Some(path), None) => {
-            // No overflow below 16 TiB on a 64-bit machine; a 32-bit one
-            // cannot hold more than `usize::MAX` anyway.
-            let max_bytes = source.max_volume_mb.saturating_mul(1 << 20);
             if source.dims.is_none() && source.dtype.is_none() {
                 let opts = isoscope_sim::formats::Options { index: source.volume_index, max_bytes };
                 if let Some((v, notes)) = LoadedVolume::read_known_with(path, &opts)? {
@@ -511,7 +512,19 @@ fn load(source: &Source) -> Result<(LoadedVolume, Option<DemoSpec>)> {
         (None, Some(_)) if source.volume_index > 0 => {
             bail!("a demo is one volume; --volume {} asks for another", source.volume_index)
         }
-        (None, Some(spec)) => Ok((LoadedVolume::demo(spec)?, Some(spec))),
+        (None, Some(spec)) => {
+            let bytes = spec.n.saturating_pow(3).saturating_mul(4);
+            if bytes > max_bytes {
+                bail!(
+                    "the demo's {n}^3 f32 samples take {} MiB, more than the limit of {} MiB \
+                     (--max-volume-mb raises it)",
+                    bytes.div_ceil(1 << 20),
+                    max_bytes >> 20,
+                    n = spec.n
+                );
+            }
+            Ok((LoadedVolume::demo(spec)?, Some(spec)))
+        }
         _ => bail!("give a volume file (with --dims and --dtype) or --demo NAME:N"),
     }
 }

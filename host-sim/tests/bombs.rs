@@ -329,3 +329,21 @@ fn max_volume_mb_refuses_and_admits_a_real_file() {
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("`0` is out of range: give 1 to 16777216"), "{stderr}");
 }
+
+/// `info` on a volume near the limit works in the memory the volume takes:
+/// its statistics read the samples in place (it copied them to `f32`
+/// twice, 8 bytes a `u8` sample more). A 96 MB `u8` file runs in 200 MB;
+/// a demo over `--max-volume-mb` is refused before it is made.
+#[test]
+fn info_summarises_in_place_and_demos_keep_to_the_limit() {
+    let dir = Scratch::new("in-place");
+    let raw = dir.path("big.raw");
+    let f = std::fs::File::create(&raw).unwrap();
+    f.set_len(512 * 512 * 384).unwrap();
+    let report = loaded(&[raw.to_str().unwrap(), "--dims", "512x512x384", "--dtype", "u8"]);
+    assert!(report.contains("samples=100663296\n") && report.contains("mean=0.000000\n"), "{report}");
+    refused(
+        &["--demo", "gyroid:300", "--max-volume-mb", "100"],
+        &["the demo's 300^3 f32 samples take 103 MiB", "--max-volume-mb"],
+    );
+}
