@@ -231,3 +231,62 @@ ENGINE = {
 }
 for name, (cfg, data) in ENGINE.items():
     write("engine", name, bytes([cfg]) + data)
+
+
+# The volume readers: a byte picking the format (readers.rs: 0 NRRD, 1
+# NIfTI-1 .nii, 2 MRC, 3 cube, 4 VTK, 5 NIfTI-1 .hdr), then a small file of
+# that format, written here from the formats' own descriptions.
+import gzip as _gzip
+
+DATA = bytes(range(24))
+NRRD = b"NRRD0004\ntype: uint8\ndimension: 3\nsizes: 4 3 2\nspacings: 1 1 2\nencoding: raw\n\n" + DATA
+
+
+def nifti(magic=b"n+1\0", datatype=2, bitpix=8, dims=(4, 3, 2), data=DATA):
+    h = bytearray(348)
+    struct.pack_into("<i", h, 0, 348)
+    struct.pack_into("<8h", h, 40, 3, *dims, 1, 1, 1, 1)
+    struct.pack_into("<hh", h, 70, datatype, bitpix)
+    struct.pack_into("<8f", h, 76, 1.0, 1.0, 1.0, 2.0, 1.0, 1.0, 1.0, 1.0)
+    struct.pack_into("<ff", h, 108, 352.0, 1.0)
+    h[344:348] = magic
+    return bytes(h) + b"\0\0\0\0" + data
+
+
+def mrc(dims=(4, 3, 2), data=DATA):
+    h = bytearray(1024)
+    struct.pack_into("<4i", h, 0, *dims, 0)
+    struct.pack_into("<3i", h, 28, *dims)
+    struct.pack_into("<3f", h, 40, float(dims[0]), float(dims[1]), float(dims[2]))
+    struct.pack_into("<3f", h, 52, 90.0, 90.0, 90.0)
+    struct.pack_into("<3i", h, 64, 1, 2, 3)
+    h[208:212] = b"MAP "
+    h[212:216] = b"\x44\x44\x00\x00"
+    return bytes(h) + data
+
+
+CUBE = (b"a cube\nof two by two by two\n 1 0.0 0.0 0.0\n 2 1.0 0.0 0.0\n 2 0.0 1.0 0.0\n 2 0.0 0.0 1.0\n"
+        b" 1 1.0 0.0 0.0 0.0\n 1.0 2.0 3.0 4.0 5.0\n 6.0 7.0 8.0\n")
+VTK_HEAD = (b"# vtk DataFile Version 3.0\nseed\n%s\nDATASET STRUCTURED_POINTS\nDIMENSIONS 2 2 2\n"
+            b"ORIGIN 0 0 0\nSPACING 1 1 1\nPOINT_DATA 8\nSCALARS s float 1\nLOOKUP_TABLE default\n")
+VTK_ASCII = VTK_HEAD % b"ASCII" + b"1 2 3 4 5 6 7 8\n"
+VTK_BINARY = VTK_HEAD % b"BINARY" + struct.pack(">8f", *range(1, 9)) + b"\n"
+
+READERS = {
+    "nrrd_raw": (0, NRRD),
+    "nrrd_gzip": (0, NRRD.replace(b"encoding: raw", b"encoding: gzip").replace(DATA, _gzip.compress(DATA, mtime=0))),
+    "nrrd_ascii": (0, NRRD.replace(b"encoding: raw", b"encoding: ascii").replace(DATA, b" ".join(b"%d" % b for b in DATA))),
+    "nifti": (1, nifti()),
+    "nifti_f32": (1, nifti(datatype=16, bitpix=32, dims=(2, 2, 2), data=struct.pack("<8f", *range(8)))),
+    "nifti_gz": (1, _gzip.compress(nifti(), mtime=0)),
+    "mrc": (2, mrc()),
+    "mrc_gz": (2, _gzip.compress(mrc(), mtime=0)),
+    "cube": (3, CUBE),
+    "cube_gz": (3, _gzip.compress(CUBE, mtime=0)),
+    "vtk_ascii": (4, VTK_ASCII),
+    "vtk_binary": (4, VTK_BINARY),
+    "vtk_gz": (4, _gzip.compress(VTK_BINARY, mtime=0)),
+    "nifti_pair_header": (5, nifti(magic=b"ni1\0")[:348]),
+}
+for name, (pick, data) in READERS.items():
+    write("readers", name, bytes([pick]) + data)
