@@ -167,54 +167,65 @@ impl Keep<'_, '_, '_> {
         self.live = self.stride.keeps(axis, index);
     }
 
-    /// Where `c` goes (the back, else the spill) and whether it finds room
-    /// there.
-    fn place(&self, c: &Command<Point3>) -> (bool, bool) {
-        let room = self.back.capacity().saturating_sub(self.back.len());
-        // The back until the spill takes its first command (in order: the
-        // spill's points come after all of the back's). A polyline may go on
-        // from the back into the spill, but does not start in the back's
-        // last slot (were the spill full, that `MoveTo` would be left alone).
-        let back = self.spill.capacity() == 0
-            || (self.spill.is_empty() && (room > 1 || (room == 1 && !matches!(c, Command::MoveTo(_)))));
-        if back {
-            return (true, room > 0);
-        }
+    /// Whether the spill has room for `c` beside the scratch the stitch
+    /// pass will want for all the pieces kept.
+    #[cold]
+    fn spill_fits(&self, c: &Command<Point3>) -> bool {
         let frags = *self.frags as usize + usize::from(!matches!(c, Command::LineTo(_)));
         let points = self.back.len() + self.spill.len() + 1;
-        // Room for one more spilled point beside the stitch's scratch.
         let need = Geometry::bytes_for(self.spill.len() + 1) + path::stitch_reserve(frags, points);
-        (false, need <= self.memory && self.spill.len() < self.spill.capacity())
+        need <= self.memory && self.spill.len() < self.spill.capacity()
+    }
+
+    /// Thin the surface to the next coarser stride, if there is one;
+    /// whether there was.
+    #[cold]
+    fn thin(&mut self) -> bool {
+        let Some(coarser) = self.stride.coarser() else { return false };
+        self.stride = coarser;
+        self.live = coarser.keeps(self.slice.0, self.slice.1);
+        *self.frags = path::thin(self.back, self.spill, &self.stride);
+        true
     }
 }
 
 impl CommandSink<Point3> for Keep<'_, '_, '_> {
     type Error = Infallible;
-    #[inline]
+    #[inline(always)]
     fn command(&mut self, _level: usize, c: Command<Point3>) -> Result<(), Infallible> {
-        loop {
+        if !self.live {
+            // A slice thinned away (while it was being contoured).
+            return Ok(());
+        }
+        let starts = !matches!(c, Command::LineTo(_));
+        let kept = loop {
+            let room = self.back.capacity().saturating_sub(self.back.len());
+            // The back until the spill takes its first command (in order:
+            // the spill's points come after all of the back's). A polyline
+            // may go on from the back into the spill, but does not start in
+            // the back's last slot (were the spill full, that `MoveTo` would
+            // be left alone).
+            let back = self.spill.capacity() == 0
+                || (self.spill.is_empty() && (room > 1 || (room == 1 && !matches!(c, Command::MoveTo(_)))));
+            if back && room > 0 {
+                break self.back.push(c).is_ok();
+            }
+            if !back && self.spill_fits(&c) {
+                break self.spill.push_within(c, usize::MAX).is_ok();
+            }
+            // Full: thin and try again, or (at the coarsest stride) refuse
+            // it, counted.
+            if !self.thin() {
+                break if back { self.back.push(c).is_ok() } else { self.spill.push_within(c, 0).is_ok() };
+            }
             if !self.live {
-                // A slice thinned away while it was being contoured.
                 return Ok(());
             }
-            let (back, room) = self.place(&c);
-            let coarser = if room { None } else { self.stride.coarser() };
-            let Some(coarser) = coarser else {
-                let starts = !matches!(c, Command::LineTo(_));
-                let kept = if back {
-                    self.back.push(c).is_ok()
-                } else {
-                    self.spill.push_within(c, if room { usize::MAX } else { 0 }).is_ok()
-                };
-                if kept && starts {
-                    *self.frags = self.frags.saturating_add(1);
-                }
-                return Ok(());
-            };
-            self.stride = coarser;
-            self.live = coarser.keeps(self.slice.0, self.slice.1);
-            *self.frags = path::thin(self.back, self.spill, &self.stride);
+        };
+        if kept && starts {
+            *self.frags = self.frags.saturating_add(1);
         }
+        Ok(())
     }
 }
 
