@@ -237,8 +237,7 @@ impl LoadedVolume {
             bail!("the .den header is inconsistent: {count} samples for extents {len:?}");
         }
         let need = formats::check_size(&[dims.0, dims.1, dims.2], formats::Elem::U8, max_bytes)?;
-        let mut data = input.data(need);
-        let body = data.take(need).and_then(|b| data.finish().map(|()| b)).with_context(|| {
+        let body = input.exactly(need).with_context(|| {
             format!(
                 "the .den header's {}x{}x{} samples need {need} bytes after the header",
                 dims.0, dims.1, dims.2
@@ -285,8 +284,7 @@ impl LoadedVolume {
         let load = || -> Result<Self> {
             let need = formats::check_size(&[dims.0, dims.1, dims.2], dtype.into(), max_bytes)?;
             let mut input = Input::open_plain(path)?;
-            let mut data = input.data(need);
-            let bytes = data.take(need).and_then(|b| data.finish().map(|()| b)).with_context(|| {
+            let bytes = input.exactly(need).with_context(|| {
                 format!(
                     "{}x{}x{} {dtype:?} samples need {need} bytes (wrong --dims/--dtype?)",
                     dims.0, dims.1, dims.2

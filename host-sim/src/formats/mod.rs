@@ -417,6 +417,15 @@ impl<'a> Input<'a> {
         Data { input: self, start, len: len as u64 }
     }
 
+    /// The next `len` bytes, the last of the input: short data and data
+    /// after them are both errors ([`Data::take`], [`Data::finish`]).
+    pub(crate) fn exactly(&mut self, len: usize) -> Result<Vec<u8>> {
+        let mut data = self.data(len);
+        let bytes = data.take(len)?;
+        data.finish()?;
+        Ok(bytes)
+    }
+
     /// Allow `bytes` more bytes of text from here on ([`Input::line`],
     /// [`Input::token`]) for `why` (as in "12 values take"), instead of what
     /// was allowed before. At first a header's worth, [`HEADER_TEXT`].

@@ -132,8 +132,7 @@ fn read_from(input: &mut Input<'_>, opts: &Options) -> Result<Loaded> {
         format!("the file is truncated: its extended header of {nsymbt} bytes (NSYMBT) ends past the end of the file")
     })?;
     let offset = HEADER + ext;
-    let mut data = input.data(need);
-    let body = data.take(need).and_then(|b| data.finish().map(|()| b)).with_context(|| {
+    let body = input.exactly(need).with_context(|| {
         format!(
             "the header's extents {}x{}x{} of mode {mode} ({}) need {need} bytes of data from byte {offset}",
             n[0],
