@@ -456,6 +456,9 @@ mod cpu {
 
     impl Streaming {
         /// As the DMA path's: fill the current half from `samples`.
+        // Not inlined: a call a half costs nothing, and the refill is then
+        // one function that `scripts/firmware-profile` can time run by run.
+        #[inline(never)]
         pub fn fill_from(&mut self, samples: &mut impl SampleSource) -> Result<Filled, DmaError> {
             let Self { out, slot, last_beam, recording } = self;
             let recording = *recording;

@@ -20,7 +20,8 @@
 //! without a sample clock, for the end-to-end test
 //! (`scripts/firmware-qemu-test`): it records [`isoscope_scene::QEMU_FRAMES`]
 //! frames of the boot picture, then, after the first volume received over
-//! USART2 is drawn, as many frames of it, sends its answers and exits QEMU.
+//! USART2 is drawn, plays one frame of it unrecorded and records as many
+//! frames of it, sends its answers and exits QEMU.
 //!
 //! [`Screen::frame`]: isoscope_core::engine::Screen::frame
 #![no_std]
@@ -380,6 +381,10 @@ mod qemu {
         Boot(usize),
         /// Waiting for a volume from the host.
         Wait,
+        /// Playing the received picture once unrecorded: its refill is
+        /// the board's work alone (a recorded frame also writes every
+        /// sample to the DAC from the CPU), for `scripts/firmware-bench`.
+        Unrecorded,
         /// Recording the received picture; frames left.
         Received(usize),
     }
@@ -426,9 +431,12 @@ mod qemu {
                 }
                 Step::Wait => {
                     if redrawn && engine.counters().volumes > self.boot_volumes {
-                        out.record(true);
-                        self.step = Step::Received(QEMU_FRAMES);
+                        self.step = Step::Unrecorded;
                     }
+                }
+                Step::Unrecorded => {
+                    out.record(true);
+                    self.step = Step::Received(QEMU_FRAMES);
                 }
                 Step::Received(left) if left > 1 => self.step = Step::Received(left - 1),
                 Step::Received(_) => {
