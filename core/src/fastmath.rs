@@ -32,8 +32,18 @@ pub(crate) fn ceil(v: f32) -> f32 {
 /// `libm`.
 #[inline]
 pub(crate) fn sqrt(x: f32) -> f32 {
+    sqrt_recip(x).0
+}
+
+/// [`sqrt`] and, for free, about `1 / sqrt(x)` (the Newton estimate,
+/// relative error below 1e-6; `1 / libm::sqrtf(x)` where [`sqrt`] goes to
+/// `libm`, so infinite for zero): a length and what turns a difference
+/// into a unit direction, without the FPU's 14-cycle division.
+#[inline]
+pub(crate) fn sqrt_recip(x: f32) -> (f32, f32) {
     if !(f32::MIN_POSITIVE..f32::INFINITY).contains(&x) {
-        return libm::sqrtf(x);
+        let s = libm::sqrtf(x);
+        return (s, 1.0 / s);
     }
     let h = 0.5 * x;
     let mut r = f32::from_bits(0x5f37_5a86 - (x.to_bits() >> 1));
@@ -44,10 +54,10 @@ pub(crate) fn sqrt(x: f32) -> f32 {
     if s < 16_777_216.0 {
         let m = (s + 0.5) as u32 as f32;
         if m * m == x {
-            return m;
+            return (m, r);
         }
     }
-    s
+    (s, r)
 }
 
 /// `roundf(x)` (halves away from zero) clamped into `0..=65535`, NaN to
@@ -115,6 +125,15 @@ mod tests {
             assert_eq!(sqrt(v), k as f32, "sqrt({v})");
         }
         assert_eq!(sqrt(3.0 * 3.0 + 4.0 * 4.0), 5.0);
+        for x in [1e-40f32, 0.0, 1e-30, 0.7, 2.0, 1234.5, 4095.0 * 4095.0 * 2.0, 1e30] {
+            let (s, r) = sqrt_recip(x);
+            assert_eq!(s, sqrt(x));
+            let want = 1.0 / f64::from(libm::sqrtf(x));
+            assert!(
+                ((f64::from(r) - want) / want).abs() < 1e-6 || (x == 0.0 && r.is_infinite()),
+                "1/sqrt({x}) = {r}"
+            );
+        }
         let mut x = 1.17e-38f32;
         while x < 1e30 {
             let (a, b) = (sqrt(x), libm::sqrtf(x));

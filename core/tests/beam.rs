@@ -140,12 +140,14 @@ fn octagon_closed_contour_at_12_bits() {
         "        ###          ###",
         "          ############",
     ]);
-    // With 45 degree turns and the default 60 degree threshold: no corner
-    // dwell, only the start and end dwells.
+    // With 45 degree turns and the default 60 degree threshold: one run
+    // of steps 8 LSB apart along the whole outline, no corner dwell, only
+    // the start and end dwells (per side, each would take ceil(1300.6 / 8)
+    // = 163: 1304).
     let st = frame_stats(cmds.iter().copied(), &cfg);
-    let steps: u64 =
-        cmds.windows(2).map(|w| (w[0].point().distance(*w[1].point()) / 8.0).ceil() as u64).sum();
-    assert_eq!(steps, 8 * 163);
+    let length: f32 = cmds.windows(2).map(|w| w[0].point().distance(*w[1].point())).sum();
+    let steps = (length / 8.0).ceil() as u64;
+    assert_eq!(steps, 1302);
     assert_eq!(st.lit_samples, steps + 2 + 1);
     assert_eq!(st.polylines, 1);
 }
@@ -212,31 +214,31 @@ fn contour_of_a_grid_drawn_through_the_scheduler() {
         "",
         "",
         "                #",
-        "           ##### #####",
-        "          ##         ##",
-        "         #             ##",
-        "       ##               ##",
-        "      ##                 ##",
-        "      #                   #",
+        "           ###########",
+        "         ##           #",
+        "        ##             ##",
+        "       #                ##",
+        "      ##                  #",
+        "      #                    #",
         "     #                     #",
-        "     #                     ##",
+        "    ##                      #",
         "    #                       #",
         "    #                       #",
         "    #                       #",
         "    #                       #",
-        "    #                        #",
+        "    #                       ##",
         "    #                       #",
         "    #                       #",
         "    #                       #",
         "    #                       #",
-        "     #                     ##",
+        "     #                      #",
         "     #                     #",
-        "      #                   #",
-        "       #                 #",
-        "       ##               ##",
-        "         #             ##",
-        "          ##         ##",
-        "            #########",
+        "     ##                   #",
+        "      #                  #",
+        "       ##                #",
+        "         #              #",
+        "          ##         ###",
+        "           ##########",
     ]);
 }
 
@@ -412,8 +414,8 @@ fn sxy(s: &Sample) -> (f64, f64) {
 enum Lit {
     /// `n` samples at one code.
     Dwell { at: (u16, u16), n: u64 },
-    /// A segment's steps.
-    Segment { a: ScreenPoint, b: ScreenPoint, n: u64 },
+    /// One lit step at `at` (exact, before rounding), on the segment `a b`.
+    Step { at: (f64, f64), a: ScreenPoint, b: ScreenPoint },
 }
 
 /// The model's prediction: lit groups in order, blanked targets, stats.
@@ -424,9 +426,9 @@ type Model = (Vec<Lit>, Vec<(u16, u16)>, FrameStats);
 /// or `None` when a vertex turns within 0.1 degrees of the threshold (the
 /// float rounding of the two computations may disagree there: the
 /// scheduler compares cosines in `f32`, coarse near 0 and 180 degrees), or
-/// a segment's length is within a millionth of a whole number of steps (the
-/// scheduler's square root is good to about 1e-6, not correctly rounded, so
-/// the step count may differ by one there).
+/// a step falls within a few thousandths of an LSB of a vertex (the
+/// scheduler measures the path in `f32` with a square root good to about
+/// 1e-6, so the step may fall on either side of it there).
 fn model(cmds: &[Cmd], cfg: &BeamConfig) -> Option<Model> {
     let max = cfg.max_code();
     let c = |q: ScreenPoint| (code(q.x, max), code(q.y, max));
@@ -476,17 +478,20 @@ fn model(cmds: &[Cmd], cfg: &BeamConfig) -> Option<Model> {
                 st.blank_length += pos.distance(v[0]);
                 targets.push(c(v[0]));
                 lit.push(Lit::Dwell { at: c(v[0]), n: u64::from(cfg.dwell_start) });
+                // Steps wherever the path since the last lit sample
+                // reaches `lit_step`; a run ends at a corner or the end,
+                // with a sample there.
+                let step = f64::from(cfg.lit_step);
+                let mut ahead = step;
                 for i in 1..v.len() {
                     let (a, b) = (v[i - 1], v[i]);
                     let len = a.distance(b);
                     st.lit_length += len;
-                    let steps = f64::from(len) / f64::from(cfg.lit_step);
-                    if steps >= 1.0 && (steps - steps.round()).abs() <= 2e-6 * steps {
-                        return None;
-                    }
-                    lit.push(Lit::Segment { a, b, n: (len / cfg.lit_step).ceil().max(1.0) as u64 });
+                    let (ax, ay) = (f64::from(a.x), f64::from(a.y));
+                    let (dx, dy) = (f64::from(b.x) - ax, f64::from(b.y) - ay);
+                    let l = (dx * dx + dy * dy).sqrt();
                     let extra = match v.get(i + 1) {
-                        None => cfg.dwell_end,
+                        None => Some(cfg.dwell_end),
                         Some(&n) => {
                             let t1 = f64::from(b.y - a.y).atan2(f64::from(b.x - a.x));
                             let t2 = f64::from(n.y - b.y).atan2(f64::from(n.x - b.x));
@@ -497,10 +502,23 @@ fn model(cmds: &[Cmd], cfg: &BeamConfig) -> Option<Model> {
                             if (turn - f64::from(cfg.corner_angle_deg)).abs() < 0.1 {
                                 return None;
                             }
-                            if turn > f64::from(cfg.corner_angle_deg) { cfg.corner_dwell } else { 0 }
+                            (turn > f64::from(cfg.corner_angle_deg)).then_some(cfg.corner_dwell)
                         }
                     };
-                    lit.push(Lit::Dwell { at: c(b), n: u64::from(extra) });
+                    let tolerance = 4e-3 + 2e-6 * (l + step);
+                    let mut t = ahead;
+                    while t <= l + tolerance {
+                        if (t - l).abs() <= tolerance {
+                            return None;
+                        }
+                        lit.push(Lit::Step { at: (ax + dx * t / l, ay + dy * t / l), a, b });
+                        t += step;
+                    }
+                    ahead = t - l;
+                    if let Some(dwell) = extra {
+                        lit.push(Lit::Dwell { at: c(b), n: 1 + u64::from(dwell) });
+                        ahead = step;
+                    }
                 }
                 pos = *v.last().unwrap();
             }
@@ -653,22 +671,17 @@ proptest! {
                         prev = s.copied();
                     }
                 }
-                Lit::Segment { a, b, n } => {
-                    let mut from = prev.unwrap();
-                    prop_assert_eq!((from.x, from.y), (code(a.x, max), code(a.y, max)));
-                    for k in 0..n {
-                        let s = *it.next().unwrap();
-                        prop_assert!(dist_to_segment(sxy(&s), a, b) <= ON_SEGMENT, "{:?} off {:?}", s, g);
-                        let step = ((f64::from(s.x) - f64::from(from.x)).powi(2)
-                            + (f64::from(s.y) - f64::from(from.y)).powi(2)).sqrt();
-                        prop_assert!(step <= f64::from(cfg.lit_step) + 2f64.sqrt() + 1e-3,
-                            "step {} > {} + sqrt 2 in {:?}", step, cfg.lit_step, g);
-                        if k + 1 == n {
-                            prop_assert_eq!((s.x, s.y), (code(b.x, max), code(b.y, max)), "end of {:?}", g);
-                        }
-                        from = s;
-                    }
-                    prev = Some(from);
+                Lit::Step { at, a, b } => {
+                    let from = prev.unwrap();
+                    let s = *it.next().unwrap();
+                    let off = ((f64::from(s.x) - at.0).powi(2) + (f64::from(s.y) - at.1).powi(2)).sqrt();
+                    prop_assert!(off <= ON_SEGMENT + 1e-3, "{:?} is {} from {:?}", s, off, g);
+                    prop_assert!(dist_to_segment(sxy(&s), a, b) <= ON_SEGMENT + 1e-3, "{:?} off {:?}", s, g);
+                    let step = ((f64::from(s.x) - f64::from(from.x)).powi(2)
+                        + (f64::from(s.y) - f64::from(from.y)).powi(2)).sqrt();
+                    prop_assert!(step <= f64::from(cfg.lit_step) + 2f64.sqrt() + 1e-3,
+                        "step {} > {} + sqrt 2 at {:?}", step, cfg.lit_step, g);
+                    prev = Some(s);
                 }
             }
         }

@@ -259,11 +259,11 @@ impl Default for PhosphorConfig {
     /// - `spot_sigma: 1.25` px: a ~0.5 mm spot (full width at half maximum
     ///   ≈ 2.35 σ) on a ~10 cm screen is ~5 px of 1024, i.e. σ ≈ 2; 1.25
     ///   keeps the lines crisp at that size while still smooth (no aliasing:
-    ///   the scheduler's 16 LSB steps are 4 px, the line is continuous).
+    ///   the scheduler's 17 LSB steps are 4.25 px, the line is continuous).
     /// - `energy_per_sample: 1.0`: the buffer counts samples.
     /// - `exposure: 4.0`: a line drawn at the scheduler's default speed
-    ///   (16 LSB = 4 px a sample, so 0.25 samples a pixel of length, peak
-    ///   0.25 / (√(2π) σ) = 0.08 a pixel) tone-maps to 0.27, shown at 0.55
+    ///   (17 LSB = 4.25 px a sample, so 0.24 samples a pixel of length, peak
+    ///   0.24 / (√(2π) σ) = 0.075 a pixel) tone-maps to 0.26, shown at 0.54
     ///   after gamma: a bright, saturated green line. Two lines crossing (or
     ///   lying close, at a surface's silhouette) show at 0.71, pale green,
     ///   and the scheduler's dwell spots (2 samples at a polyline's start, 4

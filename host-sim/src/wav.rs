@@ -34,27 +34,29 @@
 //!
 //! Each DAC sample becomes one audio sample frame at
 //! [`WavConfig::rate_hz`]. The scheduler's [default beam](BeamConfig::default)
-//! is for a 1 MS/s DAC and a ~1 MHz scope: 16 LSB a sample. A sound card at
+//! is for a 1 MS/s DAC and a ~1 MHz scope: 17 LSB a sample. A sound card at
 //! 48 kHz (passband ~20 kHz, its reconstruction filter rounding anything
-//! faster) cannot follow that, and at 16 LSB a sample a frame would last 21
-//! times longer than on the scope's DAC (the hydrogen demo: 15,000 samples,
-//! 0.3 s a frame). Schedule the frame with [`audio_beam`] instead: the same
+//! faster) cannot follow that, and at 17 LSB a sample a frame would last 21
+//! times longer than on the scope's DAC (the hydrogen demo: 17,300 samples,
+//! 0.36 s a frame). Schedule the frame with [`audio_beam`] instead: the same
 //! beam *speed* at every rate, a full-scale line in 1 ms (`lit_step` = 85
 //! LSB at 48 kHz and 12 bits, 43 at 96 kHz, 21 at 192 kHz). A larger
 //! `lit_step` refreshes faster and rounds corners more (at 48 kHz a corner
 //! is rounded over about one step); a higher rate gives finer steps.
 //!
-//! At these rates a frame is bound by its vertices more than by its length:
-//! every segment takes at least one sample, and a contour's segments are
-//! about one voxel long, shorter than a step. Measured frames of the
-//! hydrogen demo (level 0.1, default view) with [`audio_beam`]:
+//! The scheduler spends samples by path length (a contour's segments,
+//! about a voxel long, shorter than a step, take none of their own), so a
+//! frame lasts about its length over the beam speed whatever the rate.
+//! Measured frames of the hydrogen demo (level 0.1, default view) with
+//! [`audio_beam`] (`isoscope-sim wav --demo hydrogen:N --every E
+//! --audio-rate R`, 2026-12-03):
 //!
-//! | volume | vertices | 48 kHz | 96 kHz | 192 kHz |
-//! |---|---|---|---|---|
-//! | `hydrogen:32` | 5,732 | 6,009 samples, 8 fps | 12 fps | 16 fps |
-//! | `hydrogen:32`, every 2nd slice | 2,880 | 3,057, 16 fps | 24 fps | 31 fps |
-//! | `hydrogen:32`, every 3rd slice | 1,840 | 2,011, 24 fps | 37 fps | 46 fps |
-//! | `hydrogen:16` | 1,565 | 2,084, 23 fps | 31 fps | 36 fps |
+//! | volume | 48 kHz | 96 kHz | 192 kHz |
+//! |---|---|---|---|
+//! | `hydrogen:32` | 3,667 samples, 13.1 fps | 7,068, 13.6 fps | 13,873, 13.8 fps |
+//! | `hydrogen:32`, every 2nd slice | 1,872, 25.6 fps | 3,581, 26.8 fps | 6,993, 27.5 fps |
+//! | `hydrogen:32`, every 3rd slice | 1,228, 39.1 fps | 2,343, 41.0 fps | 4,570, 42.0 fps |
+//! | `hydrogen:16` | 1,815, 26.4 fps | 3,422, 28.1 fps | 6,618, 29.0 fps |
 //!
 //! A P31 screen in a dim room shows a readable, flickering picture from
 //! about 15 frames a second and a steady one from about 40: contour fewer

@@ -61,18 +61,28 @@
 //! - **`MoveTo(p)`** (of a polyline that draws something): a blanked jump to
 //!   `p`, then `dwell_start` lit samples at `p` (at least one).
 //! - **`LineTo(p)`** from the current position `a`, a segment of length
-//!   `L > 0`: `n = ceil(L / lit_step)` lit samples at `a + (p - a) * k / n`
-//!   for `k = 1 ..= n` (constant beam speed: evenly spaced, at most
-//!   `lit_step` apart before rounding, the last exactly at `p`). The steps
-//!   are computed exactly in fixed point (`a` and `p` rounded to 1/32768
-//!   LSB, no error accumulating along the segment), a few integer
-//!   operations a sample. Then, at `p`:
+//!   `L > 0`: the beam runs along the polyline at `lit_step` LSB a sample
+//!   (constant speed, hence even brightness), and a lit sample falls
+//!   wherever the path since the last lit sample reaches `lit_step`:
+//!   steps are measured along the path across vertices, so a segment
+//!   shorter than a step takes no sample of its own. A **run** of the path
+//!   goes from a polyline's start, or a corner, to the next corner or the
+//!   polyline's end; it takes `ceil(T / lit_step)` lit samples for its
+//!   length `T`, every `lit_step` along it and the last exactly at its end.
+//!   At `p`:
 //!   - if the next command continues the polyline with a `LineTo(q)` and the
-//!     direction turns by more than `corner_angle_deg` at `p` (the angle
-//!     between `p - a` and `q - p`): `corner_dwell` more lit samples at `p`;
-//!     on a straight or gently bending run, none;
+//!     direction turns by at most `corner_angle_deg` at `p` (the angle
+//!     between `p - a` and `q - p`), the run goes on: no sample of its own
+//!     at `p` unless a step falls there;
+//!   - if it turns by more, `p` is a corner: the run ends with a sample at
+//!     `p` and `corner_dwell` more, and the next run's first step is a
+//!     whole `lit_step` on;
 //!   - if the polyline ends at `p` (the next command is not a `LineTo`, or
-//!     there is none): `dwell_end` more lit samples at `p`.
+//!     there is none): a sample at `p` and `dwell_end` more.
+//!
+//!   Positions are computed in fixed point (1/32768 LSB, with 32 bits more
+//!   of fraction carried along a segment, so no error accumulates), a few
+//!   integer operations a sample.
 //! - **`Point(p)`**: a blanked jump to `p`, then `point_dwell` lit samples at
 //!   `p` (at least one).
 //! - **End of the frame**: if [`Park::return_at_end`], a blanked jump to the
@@ -88,17 +98,21 @@
 //! sharp corner at `b` plays as
 //!
 //! ```text
-//! Off×settle(|a - start|) at a, On×2 at a, On×ceil(|b-a|/16) towards b,
-//! On×1 at b, On×ceil(|c-b|/16) towards c, On×1 at c, ...
+//! Off×settle(|a - start|) at a, On×2 at a, On×(ceil(|b-a|/16) - 1) towards
+//! b, On×2 at b, On×(ceil(|c-b|/16) - 1) towards c, On×2 at c, ...
 //! ```
 //!
 //! **Lit samples trace exactly the display list.** Before rounding, every
 //! lit position is on an input segment (or is an input point), so every lit
-//! sample lies within `sqrt(2)/2` LSB of one; every input segment of
-//! non-zero length (after cleaning) is covered by lit samples from its start
-//! to its end, consecutive ones at most `lit_step + sqrt(2)` LSB apart after
-//! rounding. Blanked samples only ever sit at targets (points of the input,
-//! or the park position).
+//! sample lies within `sqrt(2)/2` LSB of one (and a few 1/32768 LSB of
+//! arithmetic); every input segment of non-zero length (after cleaning) is
+//! covered: each of its points is within `lit_step / 2` of the path's
+//! nearest lit sample, consecutive ones at most `lit_step + sqrt(2)` LSB
+//! apart after rounding. Corners, starts and ends are sampled exactly;
+//! across a gentle bend the beam's straight step cuts the vertex by at
+//! most `lit_step / 4 * sin(corner_angle_deg)` (about 3.5 LSB at the
+//! defaults, under the amplifiers' own lag). Blanked samples only ever sit
+//! at targets (points of the input, or the park position).
 //!
 //! **Bounded work.** Each segment takes at most
 //! `floor(2^(bits+1) / lit_step) + 1` samples (more than the screen's
@@ -202,10 +216,10 @@ impl Default for Park {
 pub struct BeamConfig {
     /// DAC resolution in bits, `1 ..= 16`: codes are `0 ..= 2^bits - 1`.
     pub bits: u8,
-    /// Largest step between consecutive lit samples, in LSB (`>=`
-    /// [`MIN_LIT_STEP`], finite). It sets the beam speed, hence the line
-    /// brightness: a segment of length `L` takes `ceil(L / lit_step)`
-    /// samples.
+    /// Largest step between consecutive lit samples, in LSB along the path
+    /// (`>=` [`MIN_LIT_STEP`], finite). It sets the beam speed, hence the
+    /// line brightness: a run of path of length `T` (from a start or corner
+    /// to the next corner or end) takes `ceil(T / lit_step)` samples.
     pub lit_step: f32,
     /// Samples a blanked jump waits at its target whatever its length
     /// (finite, `>= 0`).
@@ -240,12 +254,14 @@ impl Default for BeamConfig {
     /// Defaults for a ~1 MHz-bandwidth XY scope and a 12-bit DAC at 1 MS/s:
     ///
     /// - `bits: 12`.
-    /// - `lit_step: 16.0`: 16 LSB/µs, a full-screen line in 256 µs. A spot of
+    /// - `lit_step: 17.0`: 17 LSB/µs, a full-screen line in 241 µs. A spot of
     ///   ~0.5 mm on a 10 cm screen is ~20 LSB wide, so consecutive samples
     ///   overlap and lines look solid, while the amplifiers (time constant
-    ///   ~0.16 µs) lag the beam by only ~3 LSB, so corners stay sharp. A
-    ///   20 ms frame (50 Hz, flicker-free on P31 phosphor) has room for
-    ///   ~320,000 LSB of line, about 78 screen widths, less jumps and dwells.
+    ///   ~0.16 µs) lag the beam by only ~3 LSB, so corners stay sharp. An
+    ///   18 ms frame (55 Hz, flicker-free on P31 phosphor) has room for
+    ///   ~306,000 LSB of line, about 75 screen widths, less jumps and
+    ///   dwells: the paper's hydrogen 32^3 (289,000 LSB at the default view)
+    ///   plays at 57.7 Hz, where 16 LSB would give 54.4.
     /// - `settle_base: 2.0`, `settle_per_lsb: 1/256`, `settle_max: 32`: a
     ///   small jump waits 3 samples (the exponential tail of a ~1 MHz
     ///   amplifier, about 9 time constants to 0.5 LSB, plus the Z input's
@@ -265,7 +281,7 @@ impl Default for BeamConfig {
     fn default() -> Self {
         Self {
             bits: 12,
-            lit_step: 16.0,
+            lit_step: 17.0,
             settle_base: 2.0,
             settle_per_lsb: 1.0 / 256.0,
             settle_max: 32,
@@ -427,9 +443,10 @@ impl BeamConfig {
         u16::try_from(wait.clamp(1, max)).unwrap_or(u16::MAX)
     }
 
-    /// The samples one lit segment of `length` LSB takes:
-    /// `ceil(length / lit_step)`, at least 1 for a positive length, 0 for
-    /// zero (or NaN), capped at `floor(2^(bits+1) / lit_step) + 1`.
+    /// The lit samples one run of path (from a start or corner to the next
+    /// corner or end) of `length` LSB takes: `ceil(length / lit_step)`, at
+    /// least 1 for a positive length, 0 for zero (or NaN), capped at
+    /// `floor(2^(bits+1) / lit_step) + 1`.
     ///
     /// Meaningful for a valid configuration; never panics.
     pub fn segment_samples(&self, length: f32) -> u32 {
@@ -447,8 +464,9 @@ impl BeamConfig {
         steps.min(cap)
     }
 
-    /// The most samples one lit segment may take:
-    /// `floor(2^(bits+1) / lit_step) + 1`.
+    /// The most lit steps one segment may take:
+    /// `floor(2^(bits+1) / lit_step) + 1` (more than the screen's diagonal
+    /// needs: a guard against float accidents only).
     pub fn segment_cap(&self) -> u32 {
         let span = f32::from(self.max_code()) + 1.0;
         let cap = libm::floorf(2.0 * span / self.lit_step);
@@ -485,7 +503,7 @@ mod tests {
         assert_eq!(d.sanitized(), d);
         assert_eq!(d.bits, 12);
         assert_eq!(d.max_code(), 4095);
-        assert_eq!(d.lit_step, 16.0);
+        assert_eq!(d.lit_step, 17.0);
         assert_eq!((d.settle_base, d.settle_per_lsb, d.settle_max), (2.0, 1.0 / 256.0, 32));
         assert_eq!((d.dwell_start, d.dwell_end, d.corner_dwell, d.point_dwell), (2, 1, 1, 4));
         assert_eq!(d.corner_angle_deg, 60.0);
@@ -494,7 +512,7 @@ mod tests {
         assert_eq!(d.settle_samples(4096.0), 18);
         assert_eq!(d.settle_samples(4095.0 * core::f32::consts::SQRT_2), 25);
         assert_eq!(d.settle_samples(1.0), 3);
-        assert_eq!(d.segment_cap(), 513);
+        assert_eq!(d.segment_cap(), 482);
     }
 
     #[test]
@@ -543,7 +561,7 @@ mod tests {
         assert_eq!((s.dwell_start, s.point_dwell), (1, 1));
         let s = BeamConfig { bits: 0, lit_step: f32::NAN, ..garbage }.sanitized();
         assert_eq!(s.validate(), Ok(()));
-        assert_eq!((s.bits, s.lit_step, s.park.x), (1, 16.0, 1));
+        assert_eq!((s.bits, s.lit_step, s.park.x), (1, 17.0, 1));
     }
 
     #[test]

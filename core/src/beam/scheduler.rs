@@ -3,7 +3,7 @@
 
 use super::{BeamConfig, FrameStats};
 use crate::command::Command;
-use crate::fastmath::sqrt;
+use crate::fastmath::{sqrt, sqrt_recip};
 use crate::output::{Beam, Sample, SampleSource};
 use crate::view::ScreenPoint;
 
@@ -94,70 +94,93 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Clean<I> {
 }
 
 /// The expansion of one command into samples: blanked samples at the
-/// target, then lit steps from `from` to the target, then lit samples at
-/// the target.
+/// target, then lit steps along the segment from the previous position,
+/// then lit samples at the target.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 struct Plan {
     to: Pos,
-    /// The lit steps' positions, in fixed point.
-    x: Dda,
-    y: Dda,
+    /// The lit steps' positions.
+    x: Walk,
+    y: Walk,
     /// `to` rounded to DAC codes.
     code: (u16, u16),
     blank: u16,
     step: u32,
     steps: u32,
-    lit: u16,
+    /// Lit samples at `to`: the sample that ends a run (a corner or the
+    /// polyline's end) and its dwell, or a start's or a dot's dwell.
+    lit: u32,
 }
 
 /// Fractional bits of the fixed-point positions of lit steps: a code of up
-/// to 16 bits and 15 fractional bits fit an `i32` with room for rounding,
-/// and a whole move (at most `2^31 - 2^15`) does too.
+/// to 16 bits and 15 fractional bits fit an `i32` with room for rounding.
 const FRAC: u32 = 15;
 
-/// One coordinate of a segment's lit steps, exactly: step `k` of `n` is at
-/// `from + floor(d * k / n)` in fixed point (`d = to - from`), kept as a
-/// quotient and a remainder so that a step is two additions and a compare,
-/// with no error that grows along the segment.
+/// `2^FRAC`, to scale a position into fixed point.
+const ONE: f32 = (1u32 << FRAC) as f32;
+
+/// One coordinate of a segment's lit steps, in fixed point, with 32 more
+/// bits of fraction carried from step to step: a step is an add with carry
+/// and an add, and its rounding does not grow along a segment (the error
+/// after any number of steps stays below a few 1/32768 LSB, from the
+/// `f32` step alone).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-struct Dda {
-    /// Position of the last step, fixed point, in `0 ..= max << FRAC`.
+struct Walk {
+    /// Position of the next step, fixed point.
     at: i32,
-    /// `d * k mod n` of the last step, in `0 .. n`.
-    err: i32,
-    /// `floor(d / n)`.
+    /// Its fraction below the fixed point's unit, in 1/2^32.
+    frac: u32,
+    /// The step, whole units (floor).
     q: i32,
-    /// `d mod n` (Euclidean), in `0 .. n`.
-    r: i32,
+    /// The step's fraction, in 1/2^32.
+    r: u32,
 }
 
-impl Dda {
+impl Walk {
     /// `v` (finite, in `0 ..= 65535`) in fixed point, rounded.
     #[inline]
     fn fixed(v: f32) -> i32 {
-        (v * (1u32 << FRAC) as f32 + 0.5) as i32
+        (v * ONE + 0.5) as i32
     }
 
-    /// Steps from `at` to `to` (both [`Dda::fixed`]) in `n > 0` steps.
+    /// A value in fixed-point units as whole units (floor) and fraction.
     #[inline]
-    fn new(at: i32, to: i32, n: i32) -> Self {
-        let d = to - at;
-        Self { at, err: 0, q: d.div_euclid(n), r: d.rem_euclid(n) }
+    fn split(v: f32) -> (i32, u32) {
+        // `as` truncates toward zero: floor is one less for a negative
+        // value with a fraction. |v| < 2^31 here (see `Walk::new`).
+        let t = v as i32;
+        let t = if (t as f32) > v { t - 1 } else { t };
+        // In 0 .. 1; `as` saturates the rounding just below 1.
+        (t, ((v - t as f32) * 4_294_967_296.0) as u32)
     }
 
-    /// Advance one step (of `n`) and return the code there (rounded half
-    /// up; never beyond the segment's ends, so within the DAC range).
+    /// Steps from `at` (fixed point), the first `first` along and the
+    /// others `step` apart, in units of the direction `u` (a unit vector's
+    /// coordinate, so `|u| <= 1` but for rounding) in LSB.
+    #[inline]
+    fn new(at: i32, u: f32, first: f32, step: f32) -> Self {
+        // `u * first` is within the segment's extent along this axis, so
+        // below 2^16 LSB, 2^31 in fixed point. So is `u * step` when the
+        // segment has a second step; a longer step (only one on the
+        // segment) saturates in `as` and the add after the last step,
+        // never drawn, wraps.
+        let (q0, f0) = Self::split(u * first * ONE);
+        let (q, r) = Self::split(u * step * ONE);
+        Self { at: at.wrapping_add(q0), frac: f0, q, r }
+    }
+
+    /// The code of the current step (rounded half up), then advance. The
+    /// steps stay on the segment (within a few 1/32768 LSB past its end at
+    /// most), so the code is within the DAC range.
     #[inline(always)]
-    fn step(&mut self, n: i32) -> u16 {
-        self.at += self.q;
-        self.err += self.r;
-        if self.err >= n {
-            self.err -= n;
-            self.at += 1;
-        }
-        ((self.at + (1 << (FRAC - 1))) >> FRAC) as u16
+    fn step(&mut self) -> u16 {
+        let code = (self.at.wrapping_add(1 << (FRAC - 1)) >> FRAC) as u16;
+        let (frac, carry) = self.frac.overflowing_add(self.r);
+        self.frac = frac;
+        self.at = self.at.wrapping_add(self.q).wrapping_add(i32::from(carry));
+        code
     }
 }
 
@@ -178,10 +201,15 @@ pub struct Scheduler<I> {
     corner_cos: f32,
     /// [`BeamConfig::segment_cap`].
     cap: u32,
+    /// `1 / lit_step`.
+    per_lsb: f32,
     pos: Pos,
-    /// `pos` in the lit steps' fixed point ([`Dda::fixed`]), kept from the
+    /// `pos` in the lit steps' fixed point ([`Walk::fixed`]), kept from the
     /// command that went there rather than converted again.
     fixed: (i32, i32),
+    /// How far along the path from `pos` the next lit step falls, in
+    /// `(0, lit_step]` (a full step after a run's start or end).
+    ahead_by: f32,
     lit: bool,
     plan: Plan,
     ended: bool,
@@ -224,10 +252,12 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
             src,
             ahead,
             cap: cfg.segment_cap(),
+            per_lsb: 1.0 / cfg.lit_step,
+            ahead_by: cfg.lit_step,
             cfg,
             corner_cos,
             pos: start,
-            fixed: (Dda::fixed(start.x), Dda::fixed(start.y)),
+            fixed: (Walk::fixed(start.x), Walk::fixed(start.y)),
             lit: false,
             plan: Plan { to: start, ..Plan::default() },
             ended: false,
@@ -276,19 +306,73 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
 
     /// A plan that jumps (blanked) to `to`, then dwells `lit` samples there.
     fn jump(&mut self, to: Pos, lit: u16) -> Plan {
-        self.fixed = (Dda::fixed(to.x), Dda::fixed(to.y));
+        self.fixed = (Walk::fixed(to.x), Walk::fixed(to.y));
+        self.ahead_by = self.cfg.lit_step;
         let d = self.pos.distance(to);
         self.stats.blank_length += d;
         Plan {
             to,
-            x: Dda::default(),
-            y: Dda::default(),
+            x: Walk::default(),
+            y: Walk::default(),
             code: self.code(to),
             blank: self.cfg.settle_samples(d),
             step: 0,
             steps: 0,
-            lit,
+            lit: u32::from(lit),
         }
+    }
+
+    /// The lit steps along the segment from the beam's position to `p`
+    /// (`length` LSB away, `inv` about `1 / length`, `(dx, dy) = p - pos`):
+    /// one wherever the path since the last lit sample reaches `lit_step`,
+    /// strictly before `p` if the run ends at `p` (its sample there is the
+    /// plan's `lit`), up to `p` itself otherwise. Sets where the next step
+    /// falls and the fixed-point position of `p`.
+    fn steps_to(
+        &mut self,
+        p: Pos,
+        length: f32,
+        inv: f32,
+        dx: f32,
+        dy: f32,
+        run_ends: bool,
+    ) -> (u32, Walk, Walk) {
+        let (s, first) = (self.cfg.lit_step, self.ahead_by);
+        let (ax, ay) = self.fixed;
+        self.fixed = (Walk::fixed(p.x), Walk::fixed(p.y));
+        // Steps at `first + k s <= length`, `k = 0 .. n`, and the one after
+        // them, `first + n s > length`, the next segment's first: counted
+        // by a multiplication, then made exact in the float arithmetic the
+        // positions use (the estimate is off by one at most).
+        let at = |k: u32| first + k as f32 * s;
+        let mut n = if first <= length {
+            // `as` saturates: a float accident counts at most u32::MAX,
+            // capped below.
+            ((length - first) * self.per_lsb) as u32 + 1
+        } else {
+            0
+        };
+        if n > 0 && at(n - 1) > length {
+            n -= 1;
+        } else if at(n) <= length {
+            n += 1;
+        }
+        // `at(n) > length`, so the difference is positive (floats that
+        // differ subtract to a non-zero difference).
+        self.ahead_by = at(n) - length;
+        if run_ends {
+            // The run's end sample is at `p`: not twice.
+            if n > 0 && at(n - 1) >= length {
+                n -= 1;
+            }
+            self.ahead_by = s;
+        }
+        let n = n.min(self.cap);
+        if n == 0 {
+            return (0, Walk::default(), Walk::default());
+        }
+        let (ux, uy) = (dx * inv, dy * inv);
+        (n, Walk::new(ax, ux, first, s), Walk::new(ay, uy, first, s))
     }
 
     /// The plan of the next command, or `None` at the end of the frame.
@@ -305,16 +389,18 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
                 }
                 Some(Step::Line(p)) => {
                     let from = self.pos;
-                    let length = from.distance(p);
+                    let (dx, dy) = (p.x - from.x, p.y - from.y);
+                    let (length, inv) = sqrt_recip(dx * dx + dy * dy);
                     self.stats.lit_length += length;
-                    let lit = match self.ahead {
+                    // Whether the run of steps ends at `p`, and the lit
+                    // samples there if so.
+                    let end = match self.ahead {
                         Some(Step::Line(q)) => {
-                            let (ax, ay) = (p.x - from.x, p.y - from.y);
                             let (bx, by) = (q.x - p.x, q.y - p.y);
                             // cos = dot / sqrt(norms) < corner_cos, without
                             // the square root: compare squares, signs apart.
-                            let norms = (ax * ax + ay * ay) * (bx * bx + by * by);
-                            let dot = ax * bx + ay * by;
+                            let norms = (dx * dx + dy * dy) * (bx * bx + by * by);
+                            let dot = dx * bx + dy * by;
                             let c = self.corner_cos;
                             let bound = c * c * norms;
                             // A zero or underflowed product is no corner.
@@ -324,25 +410,20 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
                                 } else {
                                     dot < 0.0 && dot * dot > bound
                                 };
-                            if corner { self.cfg.corner_dwell } else { 0 }
+                            corner.then_some(self.cfg.corner_dwell)
                         }
-                        _ => self.cfg.dwell_end,
+                        _ => Some(self.cfg.dwell_end),
                     };
-                    let steps = self.cfg.segment_samples_within(length, self.cap);
-                    // At most 2^17 / MIN_LIT_STEP + 1 (the cap): an i32.
-                    let n = i32::try_from(steps.max(1)).unwrap_or(i32::MAX);
-                    let (ax, ay) = self.fixed;
-                    let (tx, ty) = (Dda::fixed(p.x), Dda::fixed(p.y));
-                    self.fixed = (tx, ty);
+                    let (steps, x, y) = self.steps_to(p, length, inv, dx, dy, end.is_some());
                     Plan {
                         to: p,
-                        x: Dda::new(ax, tx, n),
-                        y: Dda::new(ay, ty, n),
+                        x,
+                        y,
                         code: self.code(p),
                         blank: 0,
                         step: 0,
                         steps,
-                        lit,
+                        lit: end.map_or(0, |dwell| u32::from(dwell) + 1),
                     }
                 }
                 Some(Step::Dot(p)) => {
@@ -402,16 +483,10 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
             if plan.step < plan.steps {
                 let left = plan.steps - plan.step;
                 let n = if (left as usize) < room { left } else { room as u32 };
-                // The steps before the last in registers (the DDA's state is
-                // written back once), then the last, exactly at the target.
-                let last = n == left;
-                let steps = plan.steps as i32; // at most the cap, an i32
+                // The walks in registers, written back once.
                 let (mut x, mut y) = (plan.x, plan.y);
-                for _ in 0..n - u32::from(last) {
-                    put(Sample::new(x.step(steps), y.step(steps), Beam::On));
-                }
-                if last {
-                    put(Sample::new(plan.code.0, plan.code.1, Beam::On));
+                for _ in 0..n {
+                    put(Sample::new(x.step(), y.step(), Beam::On));
                 }
                 (plan.x, plan.y) = (x, y);
                 plan.step += n;
@@ -420,8 +495,8 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
                 continue;
             }
             if plan.lit > 0 {
-                let n = usize::from(plan.lit).min(room);
-                plan.lit -= n as u16; // n <= lit
+                let n = (plan.lit as usize).min(room);
+                plan.lit -= n as u32; // n <= lit
                 let (x, y) = plan.code;
                 let s = Sample::new(x, y, Beam::On);
                 for _ in 0..n {
@@ -462,7 +537,7 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
             (plan.blank, plan.step, plan.lit) = (0, plan.steps, 0);
             self.ran(usize::from(blank), Beam::Off);
             self.ran(steps as usize, Beam::On);
-            self.ran(usize::from(lit), Beam::On);
+            self.ran(lit as usize, Beam::On);
             match self.next_plan() {
                 Some(plan) => self.plan = plan,
                 None => break,
@@ -687,16 +762,61 @@ mod tests {
     #[test]
     fn constant_speed_and_exact_end_points() {
         let cfg = BeamConfig { lit_step: 16.0, ..BeamConfig::default() };
-        // 100 LSB: ceil(100 / 16) = 7 steps of 14.29.
+        // 100 LSB: a step every 16, the last (to the end) 4: ceil(100 / 16)
+        // = 7 samples.
         let s = run(&[m(1000.0, 1000.0), l(1100.0, 1000.0)], &cfg);
         let lit: Vec<u16> = s.iter().filter(|s| s.beam == Beam::On).map(|s| s.x).collect();
-        assert_eq!(lit, [1000, 1000, 1014, 1029, 1043, 1057, 1071, 1086, 1100, 1100]);
+        assert_eq!(lit, [1000, 1000, 1016, 1032, 1048, 1064, 1080, 1096, 1100, 1100]);
+        // A whole number of steps ends on the end point, once.
+        let s = run(&[m(1000.0, 1000.0), l(1000.0, 1064.0)], &cfg);
+        let lit: Vec<u16> = s.iter().filter(|s| s.beam == Beam::On).map(|s| s.y).collect();
+        assert_eq!(lit, [1000, 1000, 1016, 1032, 1048, 1064, 1064]);
         // Sub-LSB end points are rounded to the nearest code, half away.
         let s = run(&[m(10.4, 10.5), l(30.6, 10.5)], &cfg);
         let lit: Vec<Sample> = s.into_iter().filter(|s| s.beam == Beam::On).collect();
         assert_eq!(lit.first(), Some(&on(10, 11)));
         assert_eq!(lit.last(), Some(&on(31, 11)));
         assert_eq!(lit.len(), 2 + 2 + 1);
+    }
+
+    #[test]
+    fn steps_run_on_across_smooth_vertices() {
+        let cfg = BeamConfig { lit_step: 16.0, ..BeamConfig::default() };
+        // 10 + 10 + 30 LSB along x then a gentle bend (no corner): the
+        // steps fall every 16 LSB of path, not at the vertices: 16, 32, 48
+        // and the end at 50. Per segment, it would take 1 + 1 + 2.
+        let bend = [m(0.0, 100.0), l(10.0, 100.0), l(20.0, 100.0), l(50.0, 100.0)];
+        let lit: Vec<Sample> = run(&bend, &cfg).into_iter().filter(|s| s.beam == Beam::On).collect();
+        assert_eq!(
+            lit,
+            [on(0, 100), on(0, 100), on(16, 100), on(32, 100), on(48, 100), on(50, 100), on(50, 100)]
+        );
+        // Around a gentle bend the step is measured along the path: 6 LSB
+        // to (16, 0), then 10 more up the 45 degree leg.
+        let turn = [m(0.0, 0.0), l(10.0, 0.0), l(10.0 + 100.0 / 2f32.sqrt(), 100.0 / 2f32.sqrt())];
+        let lit: Vec<Sample> = run(&turn, &cfg).into_iter().filter(|s| s.beam == Beam::On).collect();
+        let d = 6.0 / 2f32.sqrt();
+        assert_eq!(lit[2], on((10.0 + d).round() as u16, d.round() as u16));
+        // A corner ends the run: a sample at the vertex, its dwell, and
+        // the next step a whole step after it.
+        let corner = [m(0.0, 0.0), l(10.0, 0.0), l(10.0, 40.0)];
+        let lit: Vec<Sample> = run(&corner, &cfg).into_iter().filter(|s| s.beam == Beam::On).collect();
+        assert_eq!(
+            lit,
+            [on(0, 0), on(0, 0), on(10, 0), on(10, 0), on(10, 16), on(10, 32), on(10, 40), on(10, 40)]
+        );
+        // Segments shorter than a step do not each take a sample: a circle
+        // of 64 chords of 4.9 LSB takes its length over 16, not 64.
+        let r = 50.0f32;
+        let mut circle = std::vec![m(1000.0 + r, 1000.0)];
+        for k in 1..=64 {
+            let a = k as f32 * core::f32::consts::TAU / 64.0;
+            circle.push(l(1000.0 + r * libm::cosf(a), 1000.0 + r * libm::sinf(a)));
+        }
+        let st = frame_stats(circle.iter().copied(), &cfg);
+        let want = libm::ceilf(st.lit_length / 16.0) as u64;
+        assert_eq!(st.lit_samples, u64::from(cfg.dwell_start) + want + u64::from(cfg.dwell_end));
+        assert_eq!(want, 20);
     }
 
     #[test]
