@@ -512,7 +512,9 @@ class Model:
         self.entry_cost = 0
         self.just_returned = False
         self.last = None              # the last instruction settled (for pairing)
-        self.cut = self.stopped_n = self.entries = self.returns = self.tail_chains = 0
+        # Charged executions cut short, and stopped before they ran.
+        self.cut = self.stopped_n = 0
+        self.entries = self.returns = self.tail_chains = 0
         self.unknown = collections.Counter()
 
     def translated(self, ptr, insns):
@@ -545,7 +547,8 @@ class Model:
             for i, ins in enumerate(insns[:prior[2]]):
                 if ins.addr == pc:
                     prior[2] = i
-                    self.cut += 1
+                    if prior[3]:
+                        self.cut += 1
                     break
         if self.resume is not None:
             self._settle(self.resume, pc)
@@ -565,8 +568,9 @@ class Model:
     def stopped(self, ptr):
         """"Stopped execution of TB chain before" ptr: the held execution did not run."""
         if self.pending is not None and self.pending[0] == self._current.get(ptr):
+            if self.pending[3]:
+                self.stopped_n += 1
             self.pending = None
-            self.stopped_n += 1
 
     def exception_entry(self):
         self.entries += 1
