@@ -10,17 +10,17 @@ listed here, and docs/cycle-model.md says how it was checked.
 Sources
 -------
 [TRM]   ARM Cortex-M4 Technical Reference Manual (ARM DDI 0439B, r0p1),
-        3.3.1 "Cortex-M4 instructions" (Table 3-1, the cycle column) and
-        3.3.2 "Load/store timings".
-[FPU]   The same manual, 7.2.3 "FPU instruction set" (Table 7-1, cycles) and
-        the paragraph after it on results consumed by the next instruction.
-[RM]    ST RM0090 (STM32F405/407 reference manual), 3.4.1 "Relation between
-        CPU clock frequency and Flash memory read time" (Table 10: 5 wait
-        states from 150 to 168 MHz at 2.7-3.6 V) and 3.5.2 "Adaptive real-time
-        memory accelerator (ART Accelerator)".
-[ARMv7M] ARMv7-M Architecture Reference Manual, B1.5.6-B1.5.8 (exception
-        entry, return and tail-chaining); the 12 / 10 / 6 cycle figures are
-        the Cortex-M4's published interrupt latency (zero wait states).
+        3.3.1 (Table 3-1, "Processor instruction set summary", its Cycles
+        column) and 3.3.2 ("Load/store timings").
+[FPU]   The same manual's FPU chapter: the FPU instruction table (cycles) and
+        the note after it on results consumed by the next instruction.
+[RM]    ST RM0090 (STM32F405/407 reference manual), the Flash interface
+        chapter: "Relation between CPU clock frequency and Flash memory read
+        time" (5 wait states from 150 to 168 MHz at 2.7-3.6 V) and "Adaptive
+        real-time memory accelerator (ART Accelerator)".
+[IRQ]   The Cortex-M4's published exception timings (zero wait states): 12
+        cycles from an exception to its handler's first instruction, 10 back,
+        6 between handlers when tail-chaining.
 
 Core timings (zero wait states) [TRM 3.3.1]
 -------------------------------------------
@@ -56,8 +56,8 @@ Core timings (zero wait states) [TRM 3.3.1]
 * The bus: SRAM and CCM accesses have no wait state; peripheral (APB/AHB)
   accesses are charged as memory (their bus wait states are not modelled).
 
-FPU timings [FPU 7.2.3]
------------------------
+FPU timings [FPU]
+-----------------
 * VADD, VSUB, VMUL, VNMUL, VABS, VNEG, VCMP, VCMPE, VCVT, VMOV (immediate,
   register, core<->single), VMRS, VMSR: 1. VMOV of two core registers
   (to or from a D register or two S registers): 2.
@@ -71,16 +71,16 @@ FPU timings [FPU 7.2.3]
   cycle, except when it is only the addend of a following multiply-accumulate
   (forwarded).
 
-Exceptions [ARMv7M]
--------------------
+Exceptions [IRQ]
+----------------
 Entry 12 cycles (charged to the handler's first instruction), return 10
 (charged to the handler's last), a return straight into another handler
 (tail-chaining) 6 instead of 10 + 12. QEMU's `-d int` lines mark entries
 ("...loaded new PC") and returns ("Exception return: magic PC"). Late arrival,
 lazy FPU stacking and the stacking of the FP context are not modelled.
 
-Flash and the ART accelerator [RM 3.4.1, 3.5.2]
------------------------------------------------
+Flash and the ART accelerator [RM]
+----------------------------------
 Code and constants are in flash (0x0800_0000, and its alias at 0): 5 wait
 states at 168 MHz, so a read that the accelerator does not serve costs 5
 cycles more. The accelerator reads 128-bit lines (16 bytes), modelled as:
@@ -396,7 +396,7 @@ class Insn:
             self.lit = ((self.addr + 4) & ~3) + (-off if m.group(1) else off)
 
     def pair(self, prev):
-        """Cycles this instruction costs more (or less) after `prev` [TRM 3.3.2, FPU 7.2.3]."""
+        """Cycles this instruction costs more (or less) after `prev` [TRM 3.3.2, FPU]."""
         d = 0
         if self.mem:
             if prev.dp_dest and prev.dp_dest & self.addr_regs:

@@ -1,8 +1,9 @@
 //! Small hand-written loops whose Cortex-M4 cycle counts follow exactly from
-//! the Technical Reference Manual (ARM DDI 0439B: Table 3-1, 3.3.2 and the
-//! FPU's Table 7-1), to check `scripts/cm4_cycles.py`: run under QEMU with
-//! the profiler's trace flags by `scripts/cycle-model-check`, which compares
-//! the model's estimate for each loop with the figure written beside it.
+//! the Cortex-M4 Technical Reference Manual (ARM DDI 0439B: Table 3-1, 3.3.2
+//! and the FPU's instruction table), to check `scripts/cm4_cycles.py`: run
+//! under QEMU with the profiler's trace flags by `scripts/cycle-model-check`,
+//! which compares the model's estimate for each loop with the figure written
+//! beside it.
 //!
 //! Each loop is a naked function (its instructions are exactly the ones
 //! below) and runs twice: the check measures the second run, from its first
@@ -367,7 +368,7 @@ extern "C" fn cyc_fp_independent() {
     );
 }
 
-/// Each result consumed by the next instruction, one cycle more (FPU 7.2.3):
+/// Each result consumed by the next instruction, one cycle more (the FPU):
 /// VADD 1, VADD 2, VMUL 2, VMOV to a core register 2. 82 + 20 x 7.
 /// Expected: 122 instructions, 222 cycles.
 #[unsafe(naked)]
@@ -605,6 +606,7 @@ extern "C" fn cyc_table_branch() {
 /// Barriers: DMB 1, DSB 1 (1 + B, B at least 0), ISB 3 (1 + B, B at least
 /// P). 82 + 20 x 5.
 /// Expected: 102 instructions, 182 cycles.
+#[rustfmt::skip] // one instruction a line, like the others
 #[unsafe(naked)]
 #[unsafe(no_mangle)]
 extern "C" fn cyc_barriers() {
@@ -623,6 +625,7 @@ extern "C" fn cyc_barriers() {
 /// An exception and its return: SVC 1, entry 12, the handler's BX LR 3,
 /// return 10. 82 + 20 x 26.
 /// Expected: 82 instructions, 602 cycles.
+#[rustfmt::skip] // one instruction a line, like the others
 #[unsafe(naked)]
 #[unsafe(no_mangle)]
 extern "C" fn cyc_svc() {
