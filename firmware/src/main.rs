@@ -21,7 +21,9 @@
 //! (`scripts/firmware-qemu-test`): it records [`isoscope_scene::QEMU_FRAMES`]
 //! frames of the boot picture, then, after the first volume received over
 //! USART2 is drawn, plays one frame of it unrecorded and records as many
-//! frames of it, sends its answers and exits QEMU.
+//! frames of it, sends its answers and exits QEMU. With `bench` too
+//! (`scripts/firmware-bench`) there is no boot picture and nothing is
+//! recorded: the received volume's frames are the board's refill alone.
 //!
 //! [`Screen::frame`]: isoscope_core::engine::Screen::frame
 #![no_std]
@@ -87,7 +89,9 @@ fn main() -> ! {
     // A new picture's frame is counted as it plays, not in `update` with
     // the beam parked (see `run`).
     engine.count_while_playing(true);
-    boot(engine);
+    if !cfg!(feature = "bench") {
+        boot(engine);
+    }
     board.watchdog.feed();
     run(board, engine)
 }
@@ -398,7 +402,8 @@ mod qemu {
 
     impl Script {
         pub fn new(boot_volumes: u32) -> Self {
-            Self { step: Step::Boot(QEMU_FRAMES), started: false, boot_volumes }
+            let step = if cfg!(feature = "bench") { Step::Wait } else { Step::Boot(QEMU_FRAMES) };
+            Self { step, started: false, boot_volumes }
         }
 
         /// A frame boundary; `redrawn`: the picture changed here.
@@ -435,7 +440,7 @@ mod qemu {
                     }
                 }
                 Step::Unrecorded => {
-                    out.record(true);
+                    out.record(!cfg!(feature = "bench"));
                     self.step = Step::Received(QEMU_FRAMES);
                 }
                 Step::Received(left) if left > 1 => self.step = Step::Received(left - 1),
@@ -449,7 +454,7 @@ mod qemu {
                     }
                     log_events(engine);
                     defmt::info!(
-                        "qemu: recorded {} frames of the received volume at t={} ms; {}; {}; engine {}",
+                        "qemu: played {} frames of the received volume at t={} ms; {}; {}; engine {}",
                         QEMU_FRAMES,
                         clock::now_ms(),
                         report.timing,

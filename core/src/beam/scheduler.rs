@@ -145,30 +145,31 @@ impl Walk {
         (v * ONE + 0.5) as i32
     }
 
-    /// A value in fixed-point units as whole units (floor) and fraction.
+    /// Steps along `d` (the segment's extent along this axis, fixed point)
+    /// from `at`: the first `first` of the way (in 1/2^31 of the segment),
+    /// the others `step` apart. A multiplication each (`SMULL`): the 64-bit
+    /// product is the offset in fixed point with 32 bits of fraction. The
+    /// fractions are at most 1 (`i32::MAX`), so every step is within the
+    /// segment: truncated toward its start, and never past its end.
     #[inline]
-    fn split(v: f32) -> (i32, u32) {
-        // `as` truncates toward zero: floor is one less for a negative
-        // value with a fraction. |v| < 2^31 here (see `Walk::new`).
-        let t = v as i32;
-        let t = if (t as f32) > v { t - 1 } else { t };
-        // In 0 .. 1; `as` saturates the rounding just below 1.
-        (t, ((v - t as f32) * 4_294_967_296.0) as u32)
+    fn new(at: i32, d: i32, first: i32, step: i32) -> Self {
+        let p0 = i64::from(d) * i64::from(first);
+        let p = i64::from(d) * i64::from(step);
+        // `>> 31` floors (arithmetic shift); the 31 bits below, shifted up,
+        // are the fraction in 1/2^32. |p| < 2^62.
+        Self {
+            at: at.wrapping_add((p0 >> 31) as i32),
+            frac: (p0 as u32) << 1,
+            q: (p >> 31) as i32,
+            r: (p as u32) << 1,
+        }
     }
 
-    /// Steps from `at` (fixed point), the first `first` along and the
-    /// others `step` apart, in units of the direction `u` (a unit vector's
-    /// coordinate, so `|u| <= 1` but for rounding) in LSB.
+    /// `v` (a fraction of a segment, `0 ..= 1` but for rounding) in 1/2^31:
+    /// `as` saturates, so 1 and a hair above become `i32::MAX`.
     #[inline]
-    fn new(at: i32, u: f32, first: f32, step: f32) -> Self {
-        // `u * first` is within the segment's extent along this axis, so
-        // below 2^16 LSB, 2^31 in fixed point. So is `u * step` when the
-        // segment has a second step; a longer step (only one on the
-        // segment) saturates in `as` and the add after the last step,
-        // never drawn, wraps.
-        let (q0, f0) = Self::split(u * first * ONE);
-        let (q, r) = Self::split(u * step * ONE);
-        Self { at: at.wrapping_add(q0), frac: f0, q, r }
+    fn ratio(v: f32) -> i32 {
+        (v * 2_147_483_648.0) as i32
     }
 
     /// The code of the current step (rounded half up), then advance. The
@@ -328,41 +329,34 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
     /// strictly before `p` if the run ends at `p` (its sample there is the
     /// plan's `lit`), up to `p` itself otherwise. Sets where the next step
     /// falls and the fixed-point position of `p`.
-    fn steps_to(
-        &mut self,
-        p: Pos,
-        length: f32,
-        inv: f32,
-        dx: f32,
-        dy: f32,
-        run_ends: bool,
-    ) -> (u32, Walk, Walk) {
+    fn steps_to(&mut self, p: Pos, length: f32, inv: f32, run_ends: bool) -> (u32, Walk, Walk) {
         let (s, first) = (self.cfg.lit_step, self.ahead_by);
         let (ax, ay) = self.fixed;
-        self.fixed = (Walk::fixed(p.x), Walk::fixed(p.y));
-        // Steps at `first + k s <= length`, `k = 0 .. n`, and the one after
-        // them, `first + n s > length`, the next segment's first: counted
-        // by a multiplication, then made exact in the float arithmetic the
-        // positions use (the estimate is off by one at most).
-        let at = |k: u32| first + k as f32 * s;
-        let mut n = if first <= length {
+        let (tx, ty) = (Walk::fixed(p.x), Walk::fixed(p.y));
+        self.fixed = (tx, ty);
+        // Steps at `first + k s <= length` for `k < n`; `next`, where step
+        // `n` falls, is beyond: the next segment's first step is there.
+        // Counted by a multiplication, then made exact in the float
+        // arithmetic (the estimate is off by one at most).
+        let (mut n, mut next) = if first <= length {
             // `as` saturates: a float accident counts at most u32::MAX,
             // capped below.
-            ((length - first) * self.per_lsb) as u32 + 1
+            let n = (((length - first) * self.per_lsb) as u32).saturating_add(1);
+            (n, first + n as f32 * s)
         } else {
-            0
+            (0, first)
         };
-        if n > 0 && at(n - 1) > length {
+        if n > 0 && next - s > length {
             n -= 1;
-        } else if at(n) <= length {
+            next -= s;
+        } else if next <= length {
             n += 1;
+            next += s;
         }
-        // `at(n) > length`, so the difference is positive (floats that
-        // differ subtract to a non-zero difference).
-        self.ahead_by = at(n) - length;
+        self.ahead_by = next - length;
         if run_ends {
             // The run's end sample is at `p`: not twice.
-            if n > 0 && at(n - 1) >= length {
+            if n > 0 && next - s >= length {
                 n -= 1;
             }
             self.ahead_by = s;
@@ -371,8 +365,11 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
         if n == 0 {
             return (0, Walk::default(), Walk::default());
         }
-        let (ux, uy) = (dx * inv, dy * inv);
-        (n, Walk::new(ax, ux, first, s), Walk::new(ay, uy, first, s))
+        // Fractions of the segment: the first step's and a step's (at most
+        // 1 when there is a second step).
+        let (f0, f) = (Walk::ratio(first * inv), Walk::ratio(s * inv));
+        // Fixed-point positions are at most 2^31 - 2^15: differences fit.
+        (n, Walk::new(ax, tx.wrapping_sub(ax), f0, f), Walk::new(ay, ty.wrapping_sub(ay), f0, f))
     }
 
     /// The plan of the next command, or `None` at the end of the frame.
@@ -414,7 +411,7 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
                         }
                         _ => Some(self.cfg.dwell_end),
                     };
-                    let (steps, x, y) = self.steps_to(p, length, inv, dx, dy, end.is_some());
+                    let (steps, x, y) = self.steps_to(p, length, inv, end.is_some());
                     Plan {
                         to: p,
                         x,

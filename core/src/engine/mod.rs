@@ -222,6 +222,10 @@ impl<'a> Engine<'a> {
     /// Between frames: abandon a stalled transfer; make a complete volume
     /// the picture (stitch and order it, in the idle slice buffers); fit a
     /// new or spinning view. Returns whether the picture changed.
+    // Never inlined: called once a frame, it costs nothing, and a board's
+    // profile can then time the commit as one function
+    // (`scripts/firmware-bench`).
+    #[inline(never)]
     pub fn update(&mut self, now_ms: u32) -> bool {
         self.dev.check_timeout(now_ms);
         let mut changed = false;
