@@ -20,13 +20,15 @@
 //! - d. the statistics match the input (lengths, counts, samples);
 //! - e. the mock DAC takes exactly the in-range samples.
 
-use isoscope_core::beam::{BeamConfig, FrameStats, MIN_LIT_STEP, Park, Scheduler, frame_stats, park_samples};
+use isoscope_core::beam::{
+    BeamConfig, FrameStats, LitSteps, MIN_LIT_STEP, Park, Scheduler, frame_stats, park_samples,
+};
 use isoscope_core::command::{Command, CommandSink, Point2};
 use isoscope_core::contour::contour_grid;
 use isoscope_core::contour::grid::Grid2;
 use isoscope_core::contour::trace::Traversal;
 use isoscope_core::output::mock::{MockDac, MockDacError};
-use isoscope_core::output::{Beam, Dac, Sample, SampleSource, Samples};
+use isoscope_core::output::{Beam, Dac, RunSink, Sample, SampleSource, Samples};
 use isoscope_core::view::ScreenPoint;
 use proptest::prelude::*;
 use std::collections::HashMap;
@@ -380,6 +382,22 @@ fn garbage_config() -> impl Strategy<Value = BeamConfig> {
         })
 }
 
+/// A [`RunSink`] writing each run out as samples; a run of steps is lit.
+struct Expand<'a>(&'a mut Vec<Sample>);
+
+impl RunSink for Expand<'_> {
+    fn repeat(&mut self, s: Sample, n: usize) {
+        self.0.extend(std::iter::repeat_n(s, n));
+    }
+
+    fn steps(&mut self, steps: &mut LitSteps, n: usize) {
+        for _ in 0..n {
+            let (x, y) = steps.step();
+            self.0.push(Sample::new(x, y, Beam::On));
+        }
+    }
+}
+
 /// An upper bound on the samples of a frame of `n` commands.
 fn sample_bound(n: usize, cfg: &BeamConfig) -> u64 {
     let c = cfg.sanitized();
@@ -587,7 +605,14 @@ proptest! {
         let mut got = Vec::new();
         let mut buf = [Sample::default(); 70];
         for (i, &n) in chunks.iter().cycle().enumerate() {
-            let ended = match i % 3 {
+            let ended = match i % 4 {
+                3 => {
+                    let before = got.len();
+                    let k = sch.fill_runs(n, &mut Expand(&mut got));
+                    prop_assert_eq!(got.len() - before, k);
+                    prop_assert!(k <= n);
+                    k < n
+                }
                 0 => {
                     let k = sch.fill(&mut buf[..n]);
                     got.extend_from_slice(&buf[..k]);

@@ -74,7 +74,8 @@
 use crate::serial::{self, Rx, Tx};
 use core::cell::UnsafeCell;
 use core::sync::atomic::{Ordering, compiler_fence};
-use isoscope_core::output::{Beam, Dac, Sample, SampleSource, Samples};
+use isoscope_core::beam::LitSteps;
+use isoscope_core::output::{Beam, Dac, RunSink, Sample, SampleSource, Samples};
 use stm32f4xx_hal::gpio::{Alternate, Analog, Output, PinState, PushPull, gpioa, gpiob};
 use stm32f4xx_hal::pac;
 use stm32f4xx_hal::prelude::*;
@@ -400,29 +401,92 @@ fn write_slots(
     start: usize,
     end: usize,
     last: &mut Beam,
-    mut also: impl FnMut(Sample),
+    also: impl FnMut(Sample),
 ) -> usize {
     let end = end.min(2 * HALF);
-    let xy = XY.0.get().cast::<u32>();
-    let blank = BLANK.0.get().cast::<u8>();
-    let mut slot = start;
-    let mut prev = *last;
-    samples.fill_with(end.saturating_sub(start), |s| {
-        if slot < end {
-            // SAFETY: `slot < end <= 2 * HALF`; the DMA is not reading
-            // these slots (the caller's word).
-            unsafe {
-                xy.add(slot).write_volatile(dac_word(s));
-                blank.add(slot).write_volatile(blank_byte(prev));
-            }
-            prev = s.beam;
-            slot += 1;
-        }
-        also(s);
-    });
-    *last = prev;
+    let mut slots = Slots {
+        xy: XY.0.get().cast::<u32>(),
+        blank: BLANK.0.get().cast::<u8>(),
+        slot: start,
+        end,
+        prev: *last,
+        also,
+    };
+    samples.fill_runs(end.saturating_sub(start), &mut slots);
+    *last = slots.prev;
     compiler_fence(Ordering::SeqCst);
-    slot
+    slots.slot
+}
+
+/// The slots [`write_slots`] fills, as a [`RunSink`]: each run written in
+/// a loop of its own, its state in registers.
+struct Slots<A> {
+    xy: *mut u32,
+    blank: *mut u8,
+    /// The next slot; never beyond `end`.
+    slot: usize,
+    /// At most `2 * HALF`.
+    end: usize,
+    /// The beam of the last sample written.
+    prev: Beam,
+    also: A,
+}
+
+impl<A: FnMut(Sample)> Slots<A> {
+    /// How many of `n` samples fit before `end`.
+    #[inline(always)]
+    fn room(&self, n: usize) -> usize {
+        n.min(self.end.saturating_sub(self.slot))
+    }
+
+    /// Write `s` (as `word`) and the blank byte `b` at the next slot. Only
+    /// for as many samples as [`Slots::room`] gave.
+    #[inline(always)]
+    fn put(&mut self, word: u32, b: u8, s: Sample) {
+        // SAFETY: `slot < end <= 2 * HALF` (the caller took `room`); the
+        // DMA is not reading these slots (`write_slots`' caller's word).
+        unsafe {
+            self.xy.add(self.slot).write_volatile(word);
+            self.blank.add(self.slot).write_volatile(b);
+        }
+        self.slot += 1;
+        (self.also)(s);
+    }
+}
+
+impl<A: FnMut(Sample)> RunSink for Slots<A> {
+    fn repeat(&mut self, s: Sample, n: usize) {
+        let n = self.room(n);
+        if n == 0 {
+            return;
+        }
+        let word = dac_word(s);
+        // The blank buffer lags a sample: the first slot holds the beam of
+        // the sample before the run.
+        self.put(word, blank_byte(self.prev), s);
+        let b = blank_byte(s.beam);
+        for _ in 1..n {
+            self.put(word, b, s);
+        }
+        self.prev = s.beam;
+    }
+
+    fn steps(&mut self, steps: &mut LitSteps, n: usize) {
+        let n = self.room(n);
+        if n == 0 {
+            return;
+        }
+        let (x, y) = steps.step();
+        let s = Sample::new(x, y, Beam::On);
+        self.put(dac_word(s), blank_byte(self.prev), s);
+        let b = blank_byte(Beam::On);
+        for _ in 1..n {
+            let (x, y) = steps.step();
+            let s = Sample::new(x, y, Beam::On);
+            self.put(dac_word(s), b, s);
+        }
+        self.prev = Beam::On;
+    }
 }
 
 #[cfg(feature = "qemu")]

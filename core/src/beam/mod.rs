@@ -160,7 +160,7 @@ pub mod pace;
 mod scheduler;
 mod stats;
 
-pub use scheduler::Scheduler;
+pub use scheduler::{LitSteps, Scheduler};
 pub use stats::{FrameStats, frame_stats};
 
 use crate::fastmath::ceil;

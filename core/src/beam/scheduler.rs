@@ -4,7 +4,7 @@
 use super::{BeamConfig, FrameStats};
 use crate::command::Command;
 use crate::fastmath::{sqrt, sqrt_recip};
-use crate::output::{Beam, Sample, SampleSource};
+use crate::output::{Beam, RunSink, Sample, SampleSource};
 use crate::view::ScreenPoint;
 
 /// A cleaned command: finite, clamped, zero-length lines dropped.
@@ -101,8 +101,7 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Clean<I> {
 struct Plan {
     to: Pos,
     /// The lit steps' positions.
-    x: Walk,
-    y: Walk,
+    walk: LitSteps,
     /// `to` rounded to DAC codes.
     code: (u16, u16),
     blank: u16,
@@ -171,6 +170,27 @@ impl Walk {
         let code = (self.at.wrapping_add(1 << (FRAC - 1)) >> FRAC) as u16;
         self.at = self.at.wrapping_add(self.q);
         code
+    }
+}
+
+/// A run of lit samples along one straight segment, as
+/// [`Scheduler::fill_runs`] hands it to a [`RunSink`]: [`LitSteps::step`]
+/// gives each sample's codes, an add and a shift a coordinate, so a DMA
+/// refill writes the run in a loop of its own.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LitSteps {
+    x: Walk,
+    y: Walk,
+}
+
+impl LitSteps {
+    /// The codes of the next lit sample. Call it only as many times as the
+    /// run says (past the run's end the codes are meaningless, never a
+    /// panic).
+    #[inline(always)]
+    pub fn step(&mut self) -> (u16, u16) {
+        (self.x.step(), self.y.step())
     }
 }
 
@@ -302,8 +322,7 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
         self.stats.blank_length += d;
         Plan {
             to,
-            x: Walk::default(),
-            y: Walk::default(),
+            walk: LitSteps::default(),
             code: self.code(to),
             blank: self.cfg.settle_samples(d),
             step: 0,
@@ -318,7 +337,7 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
     /// strictly before `p` if the run ends at `p` (its sample there is the
     /// plan's `lit`), up to `p` itself otherwise. Sets where the next step
     /// falls and the fixed-point position of `p`.
-    fn steps_to(&mut self, p: Pos, length: f32, inv: f32, run_ends: bool) -> (u32, Walk, Walk) {
+    fn steps_to(&mut self, p: Pos, length: f32, inv: f32, run_ends: bool) -> (u32, LitSteps) {
         let (s, first) = (self.cfg.lit_step, self.ahead_by);
         let (ax, ay) = self.fixed;
         let (tx, ty) = (Walk::fixed(p.x), Walk::fixed(p.y));
@@ -352,13 +371,14 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
         }
         let n = n.min(self.cap);
         if n == 0 {
-            return (0, Walk::default(), Walk::default());
+            return (0, LitSteps::default());
         }
         // Fractions of the segment: the first step's and a step's (at most
         // 1 when there is a second step).
         let (f0, f) = (Walk::ratio(first * inv), Walk::ratio(s * inv));
         // Fixed-point positions are at most 2^31 - 2^15: differences fit.
-        (n, Walk::new(ax, tx.wrapping_sub(ax), f0, f), Walk::new(ay, ty.wrapping_sub(ay), f0, f))
+        let x = Walk::new(ax, tx.wrapping_sub(ax), f0, f);
+        (n, LitSteps { x, y: Walk::new(ay, ty.wrapping_sub(ay), f0, f) })
     }
 
     /// The plan of the next command, or `None` at the end of the frame.
@@ -400,11 +420,10 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
                         }
                         _ => Some(self.cfg.dwell_end),
                     };
-                    let (steps, x, y) = self.steps_to(p, length, inv, end.is_some());
+                    let (steps, walk) = self.steps_to(p, length, inv, end.is_some());
                     Plan {
                         to: p,
-                        x,
-                        y,
+                        walk,
                         code: self.code(p),
                         blank: 0,
                         step: 0,
@@ -445,11 +464,19 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
     /// `max` of them; returns how many. Fewer than `max` only when the frame
     /// has ended. The same samples, statistics and state as taking them
     /// from the iterator one [`next`](Iterator::next) at a time (which is
-    /// this for one), which one
-    /// may mix with this; but a run of repeated samples (a jump's settle, a
-    /// dwell) or a segment's steps costs one loop here, not a state machine
-    /// round per sample. The firmware refills its DMA halves this way.
-    pub fn fill_with<F: FnMut(Sample)>(&mut self, max: usize, mut put: F) -> usize {
+    /// this for one), which one may mix with this: [`Self::fill_runs`]
+    /// with a sink that hands each sample of a run to `put`.
+    pub fn fill_with<F: FnMut(Sample)>(&mut self, max: usize, put: F) -> usize {
+        self.fill_runs(max, &mut Each(put))
+    }
+
+    /// The next samples of the frame as runs handed to `sink`, at most
+    /// `max` samples; returns how many. Fewer than `max` only when the
+    /// frame has ended. A run of repeated samples (a jump's settle, a
+    /// dwell) is one [`RunSink::repeat`] and a segment's steps one
+    /// [`RunSink::steps`], not a state machine round per sample: the
+    /// firmware refills its DMA halves this way, a loop per run.
+    pub fn fill_runs<R: RunSink>(&mut self, max: usize, sink: &mut R) -> usize {
         let mut done = 0usize;
         while done < max {
             let room = max - done;
@@ -458,10 +485,7 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
                 let n = usize::from(plan.blank).min(room);
                 plan.blank -= n as u16; // n <= blank
                 let (x, y) = plan.code;
-                let s = Sample::new(x, y, Beam::Off);
-                for _ in 0..n {
-                    put(s);
-                }
+                sink.repeat(Sample::new(x, y, Beam::Off), n);
                 self.ran(n, Beam::Off);
                 done += n;
                 continue;
@@ -469,12 +493,7 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
             if plan.step < plan.steps {
                 let left = plan.steps - plan.step;
                 let n = if (left as usize) < room { left } else { room as u32 };
-                // The walks in registers, written back once.
-                let (mut x, mut y) = (plan.x, plan.y);
-                for _ in 0..n {
-                    put(Sample::new(x.step(), y.step(), Beam::On));
-                }
-                (plan.x, plan.y) = (x, y);
+                sink.steps(&mut plan.walk, n as usize);
                 plan.step += n;
                 self.ran(n as usize, Beam::On);
                 done += n as usize;
@@ -484,10 +503,7 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
                 let n = (plan.lit as usize).min(room);
                 plan.lit -= n as u32; // n <= lit
                 let (x, y) = plan.code;
-                let s = Sample::new(x, y, Beam::On);
-                for _ in 0..n {
-                    put(s);
-                }
+                sink.repeat(Sample::new(x, y, Beam::On), n);
                 self.ran(n, Beam::On);
                 done += n;
                 continue;
@@ -567,6 +583,31 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> SampleSource for Scheduler<I> {
     #[inline]
     fn fill_with<F: FnMut(Sample)>(&mut self, max: usize, put: F) -> usize {
         Scheduler::fill_with(self, max, put)
+    }
+
+    #[inline]
+    fn fill_runs<R: RunSink>(&mut self, max: usize, sink: &mut R) -> usize {
+        Scheduler::fill_runs(self, max, sink)
+    }
+}
+
+/// A [`RunSink`] handing each sample of a run to a closure.
+struct Each<F>(F);
+
+impl<F: FnMut(Sample)> RunSink for Each<F> {
+    #[inline(always)]
+    fn repeat(&mut self, s: Sample, n: usize) {
+        for _ in 0..n {
+            (self.0)(s);
+        }
+    }
+
+    #[inline(always)]
+    fn steps(&mut self, steps: &mut LitSteps, n: usize) {
+        for _ in 0..n {
+            let (x, y) = steps.step();
+            (self.0)(Sample::new(x, y, Beam::On));
+        }
     }
 }
 

@@ -54,6 +54,25 @@ pub trait SampleSource {
     /// Hand the next samples to `put`, at most `max` of them; returns how
     /// many. Fewer than `max` only when the source has run out.
     fn fill_with<F: FnMut(Sample)>(&mut self, max: usize, put: F) -> usize;
+
+    /// The same samples as [`SampleSource::fill_with`], handed to `sink` in
+    /// runs (the scheduler's settles, dwells and segments; a run of one
+    /// sample each by default).
+    fn fill_runs<R: RunSink>(&mut self, max: usize, sink: &mut R) -> usize {
+        self.fill_with(max, |s| sink.repeat(s, 1))
+    }
+}
+
+/// Where [`SampleSource::fill_runs`] hands samples, a run at a time, so
+/// that a refill writes each run in a loop of its own (no per-sample
+/// dispatch, its state in registers).
+pub trait RunSink {
+    /// `n` samples equal to `s`.
+    fn repeat(&mut self, s: Sample, n: usize);
+
+    /// `n` lit samples along a straight line, each from
+    /// [`LitSteps::step`](crate::beam::LitSteps::step).
+    fn steps(&mut self, steps: &mut crate::beam::LitSteps, n: usize);
 }
 
 /// Any iterator of samples as a [`SampleSource`], one `next` at a time.
@@ -77,6 +96,11 @@ impl<S: SampleSource + ?Sized> SampleSource for &mut S {
     #[inline]
     fn fill_with<F: FnMut(Sample)>(&mut self, max: usize, put: F) -> usize {
         (**self).fill_with(max, put)
+    }
+
+    #[inline]
+    fn fill_runs<R: RunSink>(&mut self, max: usize, sink: &mut R) -> usize {
+        (**self).fill_runs(max, sink)
     }
 }
 
