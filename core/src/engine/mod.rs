@@ -103,7 +103,7 @@ impl<'e> Screen<'e, '_> {
 
     /// The picture's drawing commands on the screen, in drawing order.
     pub fn commands(&self) -> Projected<'e> {
-        Projected { commands: self.front.commands(), transform: self.transform }
+        Projected::new(self.front, self.transform)
     }
 
     /// The beam settings.
@@ -120,6 +120,15 @@ pub struct Projected<'e> {
     transform: Option<ViewTransform>,
 }
 
+impl<'e> Projected<'e> {
+    /// `front`'s commands through `transform`, taken in the store's own
+    /// fixed point (the transform scaled to it, bit-identical).
+    fn new(front: &'e Geometry<'_>, transform: Option<ViewTransform>) -> Self {
+        let transform = transform.map(|t| t.in_steps_of(front.shift()));
+        Self { commands: front.commands(), transform }
+    }
+}
+
 impl Iterator for Projected<'_> {
     type Item = Command<ScreenPoint>;
 
@@ -129,7 +138,9 @@ impl Iterator for Projected<'_> {
         // for every point of every frame.
         let t = self.transform.as_ref()?;
         // Unchecked: the scheduler skips points that are not finite.
-        self.commands.next().map(|c| c.map(|p| t.project_raw(p)))
+        self.commands
+            .next_packed()
+            .map(|c| c.map(|[x, y, z]| t.project_raw(Point3::new(f32::from(x), f32::from(y), f32::from(z)))))
     }
 }
 
@@ -422,7 +433,7 @@ impl<'a> Engine<'a> {
     /// point the view cannot project (behind a perspective camera) is not
     /// finite, and the beam scheduler skips it.
     pub fn commands(&self) -> Projected<'_> {
-        Projected { commands: self.front.commands(), transform: self.transform }
+        Projected::new(&self.front, self.transform)
     }
 
     /// The board plays the samples at `hz` instead of

@@ -493,37 +493,46 @@ pub struct Commands<'g, 'a> {
     close: Option<Packed>,
 }
 
-impl Iterator for Commands<'_, '_> {
-    type Item = Command<Point3>;
-
-    fn next(&mut self) -> Option<Command<Point3>> {
+impl Commands<'_, '_> {
+    /// The next command with its point as stored, in `1 / 2^shift` voxel
+    /// ([`Geometry::shift`]): for a reader that folds the scale into its
+    /// own arithmetic (the engine's projection).
+    pub fn next_packed(&mut self) -> Option<Command<Packed>> {
         if let Some(q) = self.close.take() {
-            return Some(Command::LineTo(self.g.point(q)));
+            return Some(Command::LineTo(q));
         }
         let (q, kind) = self.g.get(self.i)?;
         self.i += 1;
         // The loop ends here if the next point starts something (or none).
         let ends = self.g.kind(self.i).is_none_or(Kind::starts);
-        let p = self.g.point(q);
         let command = match kind {
-            Kind::Line => Command::LineTo(p),
+            Kind::Line => Command::LineTo(q),
             Kind::Move => {
                 self.first = None;
-                Command::MoveTo(p)
+                Command::MoveTo(q)
             }
             Kind::Dot => {
                 self.first = None;
-                Command::Point(p)
+                Command::Point(q)
             }
             Kind::Loop => {
                 self.first = Some(q);
-                Command::MoveTo(p)
+                Command::MoveTo(q)
             }
         };
         if ends {
             self.close = self.first.take();
         }
         Some(command)
+    }
+}
+
+impl Iterator for Commands<'_, '_> {
+    type Item = Command<Point3>;
+
+    fn next(&mut self) -> Option<Command<Point3>> {
+        let command = self.next_packed()?;
+        Some(command.map(|q| self.g.point(q)))
     }
 }
 

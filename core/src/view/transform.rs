@@ -320,6 +320,26 @@ impl ViewTransform {
         ScreenPoint::new(x, y)
     }
 
+    /// The same projection for points given in `1 / 2^shift` voxel (a
+    /// surface store's fixed point), `shift <= 12`: the origin scaled up
+    /// and the rows' coefficients down by the power of two, so that
+    /// [`ViewTransform::project`] of a stored point's raw coordinates is
+    /// bit for bit that of the point in voxels (a power of two scales
+    /// every product and difference exactly), one multiplication a
+    /// coordinate fewer.
+    pub(crate) fn in_steps_of(&self, shift: u8) -> ViewTransform {
+        let up = f32::from_bits((127 + u32::from(shift.min(12))) << 23);
+        let down = f32::from_bits((127 - u32::from(shift.min(12))) << 23);
+        let row = |r: Row| Row { x: r.x * down, y: r.y * down, z: r.z * down, w: r.w };
+        ViewTransform {
+            origin: Point3::new(self.origin.x * up, self.origin.y * up, self.origin.z * up),
+            sx: row(self.sx),
+            sy: row(self.sy),
+            depth: row(self.depth),
+            ..*self
+        }
+    }
+
     /// DAC units per physical unit (voxel size times spacing) at the depth
     /// of the centre of the bounds.
     pub fn scale(&self) -> f32 {
@@ -446,6 +466,26 @@ mod tests {
             let t = ViewTransform::fit(&v, b).unwrap();
             let s = t.project(b.centre());
             prop_assert!((s.x - 2047.5).abs() < 1e-3 && (s.y - 2047.5).abs() < 1e-3, "{s:?}");
+        }
+
+        /// A store's raw fixed-point coordinates through the transform
+        /// scaled to them project bit for bit as the points in voxels.
+        #[test]
+        fn steps_of_a_store_project_bit_for_bit(
+            yaw in angle(), pitch in angle(), roll in angle(), projection in projection(),
+            dims in (2u16..600, 2u16..600, 2u16..600),
+            q in (any::<u16>(), any::<u16>(), any::<u16>()),
+        ) {
+            let v = view(yaw, pitch, roll, projection);
+            let top = |d: u16| f32::from(d - 1);
+            let b = Bounds::new(Point3::new(0.0, 0.0, 0.0), Point3::new(top(dims.0), top(dims.1), top(dims.2)));
+            let t = ViewTransform::fit(&v, b).unwrap();
+            let shift = crate::path::Geometry::shift_for([dims.0, dims.1, dims.2]);
+            let k = f32::from_bits((127 - u32::from(shift)) << 23);
+            let voxels = Point3::new(f32::from(q.0) * k, f32::from(q.1) * k, f32::from(q.2) * k);
+            let raw = Point3::new(f32::from(q.0), f32::from(q.1), f32::from(q.2));
+            let (a, s) = (t.project_raw(voxels), t.in_steps_of(shift).project_raw(raw));
+            prop_assert_eq!((a.x.to_bits(), a.y.to_bits()), (s.x.to_bits(), s.y.to_bits()), "{:?} vs {:?}", a, s);
         }
 
         /// Valid but extreme inputs: any finite bounds, angles and spacings.
