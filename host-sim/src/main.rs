@@ -309,7 +309,7 @@ struct ViewArgs {
     #[arg(long, value_name = "FOV")]
     perspective: Option<f32>,
     /// Fraction of the screen left free on each side.
-    #[arg(long, default_value_t = View::DEFAULT.margin)]
+    #[arg(long, default_value_t = View::DEFAULT.margin, allow_hyphen_values = true)]
     margin: f32,
     /// DAC resolution in bits.
     #[arg(long, default_value_t = 12)]
@@ -765,7 +765,8 @@ fn prepare(
         None => 1,
     };
     if every > 1 && v.every.is_none() {
-        eprintln!("isoscope-sim: note: drawing every {every}th slice (--every to choose)");
+        let stride = scene::stride(u16::try_from(every).unwrap_or(u16::MAX));
+        eprintln!("isoscope-sim: note: drawing {stride} (--every to choose)");
     }
     let view = View {
         yaw: v.yaw,

@@ -953,3 +953,25 @@ fn wrong_numbers_are_refused_or_said_plainly() {
     let levels = report.lines().find_map(|l| l.strip_prefix("suggested_levels=")).unwrap_or("");
     assert!(!levels.is_empty(), "{report}");
 }
+
+#[test]
+fn a_negative_margin_is_a_value_with_a_plain_error() {
+    // Not "unexpected argument '-0.3'": the value reaches the view's check.
+    let out = run(&["stats", "--demo", "hydrogen:8", "--margin", "-0.3"]);
+    assert!(!out.status.success());
+    let err = text(&out.stderr);
+    assert!(err.contains("the margin must be in 0.0 .. 0.5"), "{err}");
+    assert!(!err.contains("unexpected argument"), "{err}");
+}
+
+#[test]
+fn the_chosen_stride_is_named_in_plain_english() {
+    // gyroid:96: render picks every 96 / 32 = 3rd slice, and says so.
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("g.png");
+    let out = run(&["render", "--demo", "gyroid:96", "--size", "64", "-o", &path_str(&png)]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let err = text(&out.stderr);
+    assert!(err.contains("drawing every 3rd slice"), "{err}");
+    assert!(!err.contains("3th"), "{err}");
+}
