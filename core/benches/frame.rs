@@ -4,9 +4,10 @@
 //! The engine holds a received hydrogen 16^3 volume (the firmware's boot
 //! demo at the firmware's default settings); `frame/iter` plays one frame
 //! through the scheduler's `Iterator`, `frame/fill` through
-//! `Scheduler::fill` into 512-sample halves, as the firmware does. Both
-//! report samples per second. `frame/project` is the geometry and the view
-//! alone (no beam).
+//! `Scheduler::fill` into 512-sample halves, as the firmware does before
+//! a frame is kept, `frame/replay` from the kept frame (`Engine::replay_frames`)
+//! as it does after. All report samples per second. `frame/project` is the
+//! geometry and the view alone (no beam).
 //!
 //! `volume/hydrogen{16,24}` receives a whole volume: decoding, streaming
 //! contouring and the commit (stitching and ordering).
@@ -18,7 +19,7 @@
 use criterion::{Criterion, Throughput, black_box, criterion_group, criterion_main};
 use isoscope_core::demo::Demo;
 use isoscope_core::engine::{Engine, EngineConfig, Geometry, StaticBuffers};
-use isoscope_core::output::Sample;
+use isoscope_core::output::{Sample, SampleSource};
 use isoscope_core::wire::{AXIS_X, AXIS_Y, AXIS_Z, Levels, MAX_CHUNK, Message, SampleType, encode};
 
 const SIDE: usize = 16;
@@ -92,16 +93,15 @@ fn frame(c: &mut Criterion) {
     let mut mem = Box::new(Mem::new());
     let mut engine = engine(&mut mem);
     feed_demo(&mut engine, SIDE);
-    let (_, screen) = engine.split();
-    let samples = screen.frame().count() as u64;
-    let commands = screen.commands().count();
+    let samples = engine.frame().count() as u64;
+    let commands = engine.commands().count();
     eprintln!("hydrogen {SIDE}^3: {commands} commands, {samples} samples a frame");
     let mut g = c.benchmark_group("frame");
     g.throughput(Throughput::Elements(samples));
     g.bench_function("iter", |b| {
         b.iter(|| {
             let mut sum = 0u32;
-            for s in screen.frame() {
+            for s in engine.frame() {
                 sum = sum.wrapping_add(u32::from(s.x) ^ u32::from(s.y) << 1 ^ s.beam as u32);
             }
             black_box(sum)
@@ -111,7 +111,7 @@ fn frame(c: &mut Criterion) {
         let mut half = [Sample::default(); HALF];
         b.iter(|| {
             let mut sum = 0u32;
-            let mut f = screen.frame();
+            let mut f = engine.frame();
             loop {
                 let n = f.fill(&mut half);
                 for s in half.iter().take(n) {
@@ -124,7 +124,28 @@ fn frame(c: &mut Criterion) {
             black_box(sum)
         })
     });
-    g.bench_function("project", |b| b.iter(|| screen.commands().fold(0f32, |a, c| a + c.point().x)));
+    g.bench_function("project", |b| b.iter(|| engine.commands().fold(0f32, |a, c| a + c.point().x)));
+    // The board's frames once the first is kept: replayed from memory.
+    engine.replay_frames(true);
+    engine.update(0);
+    let (_, mut screen) = engine.split();
+    assert_eq!(screen.frame().count() as u64, samples, "the first frame is recorded");
+    assert!(screen.frame().is_replay(), "the frame is kept");
+    g.bench_function("replay", |b| {
+        b.iter(|| {
+            let mut sum = 0u32;
+            let mut f = screen.frame();
+            loop {
+                let n = f.fill_with(HALF, |s| {
+                    sum = sum.wrapping_add(u32::from(s.x) ^ u32::from(s.y) << 1 ^ s.beam as u32);
+                });
+                if n < HALF {
+                    break;
+                }
+            }
+            black_box(sum)
+        })
+    });
     g.finish();
 }
 

@@ -20,15 +20,14 @@
 //! - d. the statistics match the input (lengths, counts, samples);
 //! - e. the mock DAC takes exactly the in-range samples.
 
-use isoscope_core::beam::{
-    BeamConfig, FrameStats, LitSteps, MIN_LIT_STEP, Park, Scheduler, frame_stats, park_samples,
-};
+use isoscope_core::beam::replay::Replay;
+use isoscope_core::beam::{BeamConfig, FrameStats, MIN_LIT_STEP, Park, Scheduler, frame_stats, park_samples};
 use isoscope_core::command::{Command, CommandSink, Point2};
 use isoscope_core::contour::contour_grid;
 use isoscope_core::contour::grid::Grid2;
 use isoscope_core::contour::trace::Traversal;
 use isoscope_core::output::mock::{MockDac, MockDacError};
-use isoscope_core::output::{Beam, Dac, RunSink, Sample, SampleSource, Samples};
+use isoscope_core::output::{Beam, Dac, RunSink, Sample, SampleSource, Samples, Steps};
 use isoscope_core::view::ScreenPoint;
 use proptest::prelude::*;
 use std::collections::HashMap;
@@ -390,7 +389,7 @@ impl RunSink for Expand<'_> {
         self.0.extend(std::iter::repeat_n(s, n));
     }
 
-    fn steps(&mut self, steps: &mut LitSteps, n: usize) {
+    fn steps<S: Steps>(&mut self, steps: &mut S, n: usize) {
         for _ in 0..n {
             let (x, y) = steps.step();
             self.0.push(Sample::new(x, y, Beam::On));
@@ -586,6 +585,44 @@ proptest! {
         // The mock DAC at the same resolution takes all of them.
         let mut dac = MockDac::<16, 8>::new(cfg.sanitized().bits);
         prop_assert_eq!(dac.write(samples.iter().copied()), Ok(()));
+    }
+
+    /// A frame recorded as it plays (in runs, in chunks of any size) is
+    /// the scheduler's frame, and so is every replay of it, in chunks too;
+    /// a replay reports the recorded frame's statistics.
+    #[test]
+    fn a_recorded_frame_replays_exactly(
+        cfg in garbage_config(),
+        cmds in commands(any_coord(5000.0), 24),
+        chunks in prop::collection::vec(1usize..70, 1..12),
+    ) {
+        let bound = sample_bound(cmds.len(), &cfg);
+        prop_assume!(bound <= 200_000);
+        let want: Vec<Sample> = Scheduler::new(cmds.iter().copied(), &cfg).collect();
+        let mut mem = vec![0u8; 8 * want.len() + 8];
+        let mut replay = Replay::new(&mut mem);
+        let mut sch = Scheduler::new(cmds.iter().copied(), &cfg);
+        let mut rec = replay.record(9).expect("memory");
+        let mut got = Vec::new();
+        for &n in chunks.iter().cycle() {
+            let k = rec.fill_runs(&mut sch, n, &mut Expand(&mut got));
+            if k < n {
+                break;
+            }
+        }
+        rec.finish(sch.stats());
+        prop_assert_eq!(&got, &want);
+        for _ in 0..2 {
+            let mut player = replay.play(9).expect("kept");
+            prop_assert_eq!(player.stats(), sch.stats());
+            let mut again = Vec::new();
+            for &n in chunks.iter().rev().cycle() {
+                if player.fill_runs(n, &mut Expand(&mut again)) < n {
+                    break;
+                }
+            }
+            prop_assert_eq!(&again, &want);
+        }
     }
 
     /// Filling in runs (as the firmware refills its DMA halves, in chunks

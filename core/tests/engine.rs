@@ -1215,7 +1215,7 @@ fn frames_play_on_while_the_next_volume_streams_in() {
     let bytes = Host::new().volume(&b);
     let mut played = Vec::new();
     {
-        let (mut link, screen) = e.split();
+        let (mut link, mut screen) = e.split();
         let mut frame = screen.frame();
         // A few samples, a few bytes: the DMA refill and the UART interleave.
         let mut chunks = bytes.chunks(bytes.len() / want.len() + 1);
@@ -1386,4 +1386,125 @@ fn contour_while_does_one_whole_row_a_call_when_told_to_stop() {
     // Three rows a call (the third passes 2 (n - 1) + 1 cells).
     let rows: usize = want.iter().sum();
     assert_eq!(calls, want.iter().map(|r| r.div_ceil(3)).sum::<usize>(), "{rows} rows");
+}
+
+/// The samples of the board's next frame ([`Screen::frame`]), and whether it
+/// was replayed.
+fn board_frame(e: &mut Engine<'_>) -> (Vec<isoscope_core::output::Sample>, bool) {
+    let (_, mut screen) = e.split();
+    let frame = screen.frame();
+    let replayed = frame.is_replay();
+    (frame.collect(), replayed)
+}
+
+#[test]
+fn a_still_picture_is_replayed_and_its_memory_given_back_for_a_volume() {
+    let a = Vol::demo(Demo::Torus, 12, SampleType::U8);
+    let b = Vol::demo(Demo::Sphere, 12, SampleType::U8);
+    let mut mem = big();
+    let mut e = engine(&mut mem);
+    e.replay_frames(true);
+    let mut host = Host::new();
+    e.feed(&host.volume(&a), 0);
+    assert!(e.update(0));
+    let want: Vec<_> = e.frame().collect();
+    assert!(want.len() > 100);
+    assert_eq!(board_frame(&mut e), (want.clone(), false), "the first frame is scheduled (and kept)");
+    for _ in 0..3 {
+        assert_eq!(board_frame(&mut e), (want.clone(), true), "the frames after it are replayed");
+    }
+    assert!(!e.update(5), "nothing changed");
+    assert_eq!(board_frame(&mut e), (want.clone(), true));
+
+    // A new view: the kept frame is of the old one.
+    let seq = host.next();
+    e.feed(
+        &frame(&Message::SetView {
+            seq,
+            yaw: 75.0,
+            pitch: 20.0,
+            roll: 0.0,
+            fov_deg: 0.0,
+            spin_deg_per_s: 0.0,
+        }),
+        6,
+    );
+    assert_eq!(board_frame(&mut e), (want.clone(), false), "until the update, the old view, live");
+    assert!(e.update(6));
+    let turned: Vec<_> = e.frame().collect();
+    assert_ne!(turned, want);
+    assert_eq!(board_frame(&mut e), (turned.clone(), false));
+    assert_eq!(board_frame(&mut e), (turned.clone(), true));
+
+    // A volume: its first command waits for the memory (Busy), which the
+    // next update gives back; the retry is taken and the transfer goes on.
+    let begin = host.begin(&b);
+    let rest = [host.slices(&b, MAX_CHUNK).concat(), host.end()].concat();
+    answers(&mut e);
+    e.feed(&begin, 7);
+    assert_eq!(nacks(&answers(&mut e)), [NackCode::Busy]);
+    assert_eq!(board_frame(&mut e), (turned.clone(), true), "the picture plays on meanwhile");
+    assert!(!e.update(8));
+    assert_eq!(board_frame(&mut e), (turned.clone(), false), "live while the volume may come");
+    e.feed(&begin, 20);
+    e.feed(&rest, 20);
+    assert_eq!(nacks(&answers(&mut e)), []);
+    assert!(e.update(21));
+    assert_eq!(shown(&e), batch(&b));
+    let next: Vec<_> = e.frame().collect();
+    assert_eq!(board_frame(&mut e), (next.clone(), false));
+    assert_eq!(board_frame(&mut e), (next.clone(), true), "the new picture is kept at once");
+
+    // Spinning: every frame is another; none is kept.
+    let seq = host.next();
+    e.feed(
+        &frame(&Message::SetView {
+            seq,
+            yaw: 0.0,
+            pitch: 20.0,
+            roll: 0.0,
+            fov_deg: 0.0,
+            spin_deg_per_s: 90.0,
+        }),
+        30,
+    );
+    for t in [30, 40, 50] {
+        e.update(t);
+        let live: Vec<_> = e.frame().collect();
+        assert_eq!(board_frame(&mut e), (live.clone(), false));
+        assert_eq!(board_frame(&mut e), (live, false));
+    }
+
+    // Off: the memory is the stream's again, a volume is taken at once.
+    e.replay_frames(false);
+    e.feed(&host.volume(&a), 60);
+    assert_eq!(nacks(&answers(&mut e)), []);
+}
+
+#[test]
+fn a_frame_too_long_for_the_memory_plays_live_every_time() {
+    let v = Vol::demo(Demo::Hydrogen, 16, SampleType::U8);
+    let mut mem = Mem::sized(2 * v.slice_bytes(), 64, [20_000; 2], 8 * 20_000);
+    let mut e = engine(&mut mem);
+    e.replay_frames(true);
+    e.feed(&Host::new().volume(&v), 0);
+    assert!(e.update(0));
+    let want: Vec<_> = e.frame().collect();
+    assert!(want.len() > 2 * 2 * v.slice_bytes(), "more samples than the memory has bytes");
+    for _ in 0..3 {
+        assert_eq!(board_frame(&mut e), (want.clone(), false));
+    }
+}
+
+#[test]
+fn the_firmware_memory_keeps_hydrogen_32() {
+    let v = hydrogen32();
+    let mut mem = Box::new(Firmware::new());
+    let mut e = Engine::new(EngineConfig::default(), mem.buffers()).unwrap();
+    e.replay_frames(true);
+    e.feed(&Host::new().volume(&v), 0);
+    assert!(e.update(0));
+    let want: Vec<_> = e.frame().collect();
+    assert_eq!(board_frame(&mut e), (want.clone(), false));
+    assert_eq!(board_frame(&mut e), (want, true), "hydrogen 32^3's frame fits the board's slice memory");
 }

@@ -74,8 +74,7 @@
 use crate::serial::{self, Rx, Tx};
 use core::cell::UnsafeCell;
 use core::sync::atomic::{Ordering, compiler_fence};
-use isoscope_core::beam::LitSteps;
-use isoscope_core::output::{Beam, Dac, RunSink, Sample, SampleSource, Samples};
+use isoscope_core::output::{Beam, Dac, RunSink, Sample, SampleSource, Samples, Steps};
 use stm32f4xx_hal::gpio::{Alternate, Analog, Output, PinState, PushPull, gpioa, gpiob};
 use stm32f4xx_hal::pac;
 use stm32f4xx_hal::prelude::*;
@@ -471,7 +470,7 @@ impl<A: FnMut(Sample)> RunSink for Slots<A> {
         self.prev = s.beam;
     }
 
-    fn steps(&mut self, steps: &mut LitSteps, n: usize) {
+    fn steps<S: Steps>(&mut self, steps: &mut S, n: usize) {
         let n = self.room(n);
         if n == 0 {
             return;
@@ -573,6 +572,9 @@ mod cpu {
         pub fn sample_rate_hz(&self) -> u32 {
             super::SAMPLE_RATE_HZ
         }
+
+        /// As the DMA path's (there is no sample clock).
+        pub fn restart_pacing(&mut self) {}
 
         /// As the DMA path's: always, without a sample clock.
         pub fn ready(&self) -> bool {
@@ -707,6 +709,15 @@ mod dma {
             // the DMA reads slot `2 * HALF - NDTR` next.
             let next = (2 * HALF).saturating_sub(dma1.st(5).ndtr().read().bits() as usize);
             if let Some(period) = self.pacer.filled(pace::played(next, half, HALF)) {
+                tim8.arr().write(|w| unsafe { w.bits(period - 1) });
+            }
+        }
+
+        /// The refill became cheap for good (a replayed frame): the sample
+        /// clock back to [`SAMPLE_RATE_HZ`] at once ([`Pacer::restart`]).
+        pub fn restart_pacing(&mut self) {
+            let Some((tim8, _, _)) = self.out.dma.as_ref() else { super::fault() };
+            if let Some(period) = self.pacer.restart() {
                 tim8.arr().write(|w| unsafe { w.bits(period - 1) });
             }
         }

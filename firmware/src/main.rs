@@ -89,6 +89,9 @@ fn main() -> ! {
     // A new picture's frame is counted as it plays, not in `update` with
     // the beam parked (see `run`).
     engine.count_while_playing(true);
+    // A still picture's first frame is kept in the idle slice memory and
+    // replayed: the refill at full rate (docs/board-refresh.md).
+    engine.replay_frames(true);
     if !cfg!(feature = "bench") {
         boot(engine);
     }
@@ -297,6 +300,7 @@ fn run(board: board::Board, engine: &mut Engine<'static>) -> ! {
     let mut out = out.start();
     let mut timing = Timing::default();
     let mut report = Report::new(sysclk_hz);
+    let mut replaying = false;
     #[cfg(feature = "qemu")]
     let mut script = qemu::Script::new(engine.counters().volumes);
     defmt::info!("isoscope: showing the picture; listening on USART2");
@@ -327,8 +331,14 @@ fn run(board: board::Board, engine: &mut Engine<'static>) -> ! {
         #[cfg(feature = "qemu")]
         script.boundary(redrawn, engine, &mut out, &mut tx, &report);
 
-        let (mut link, screen) = engine.split();
+        let (mut link, mut screen) = engine.split();
         let mut frame = screen.frame();
+        // From a scheduled frame to a replayed one, the refill costs a few
+        // cycles a sample: the sample clock goes back to full rate at once.
+        if frame.is_replay() && !replaying {
+            out.restart_pacing();
+        }
+        replaying = frame.is_replay();
         loop {
             let t0 = clock::cycles();
             match out.fill_from(&mut frame) {

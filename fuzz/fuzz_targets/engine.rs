@@ -6,19 +6,25 @@
 //! step per chunk: 0, 2, 4 or 6 s, so that transfers time out), then the
 //! bytes on the line. An even chunk size runs the engine as the firmware
 //! does, contouring deferred (`defer_contouring`): bytes the engine does not
-//! take yet are fed again after a few rows of `contour`. Every chunk is followed by `update`, a transmit, and
-//! every third chunk by 200 samples of the frame on screen, played through
-//! `split` while the next chunk is fed, as the firmware does.
+//! take yet are fed again after a few rows of `contour`. Every chunk is
+//! followed by `update`, a transmit, and every third chunk by the frame on
+//! screen as the board plays it (`Engine::replay_frames`: scheduled and
+//! recorded, then replayed), through `split` while the next chunk is fed,
+//! as the firmware does; it must equal the engine's frame.
 #![no_main]
 
 use isoscope_core::command::{Command, Point3};
 use isoscope_core::engine::{Engine, EngineConfig};
+use isoscope_core::output::Sample;
 use isoscope_core::wire::{
     AXIS_X, AXIS_Y, AXIS_Z, FrameDecoder, Levels, Message, PROTOCOL_VERSION, SampleType, encode,
 };
 use isoscope_fuzz::EngineMem;
 use libfuzzer_sys::fuzz_target;
 use std::sync::OnceLock;
+
+/// The most samples of a frame played and compared.
+const MAX_FRAME: usize = 20_000;
 
 /// A small volume every run ends with.
 fn clean_volume() -> Vec<u8> {
@@ -106,21 +112,24 @@ fuzz_target!(|data: &[u8]| {
     let step = u32::from(cfg >> 6) * 2000;
     let defer = chunk % 2 == 0;
     let mut mem = EngineMem::new();
-    let mut e = Engine::new(EngineConfig { defer_contouring: defer, ..config() }, mem.buffers()).expect("engine");
+    let mut e =
+        Engine::new(EngineConfig { defer_contouring: defer, ..config() }, mem.buffers()).expect("engine");
+    e.replay_frames(true);
     let mut dec = FrameDecoder::<256>::new();
     let mut now = 0u32;
     for (k, c) in line.chunks(chunk).enumerate() {
         now = now.wrapping_add(step);
         if k % 3 == 0 {
-            let (mut link, screen) = e.split();
+            // The frame as the board plays it (scheduled, recorded or
+            // replayed) is the engine's frame, sample for sample.
+            let live: Vec<Sample> = e.frame().take(MAX_FRAME).collect();
+            let (mut link, mut screen) = e.split();
             let mut frame = screen.frame();
-            for s in frame.by_ref().take(100) {
-                assert!(s.x <= 4095 && s.y <= 4095);
-            }
+            let mut played: Vec<Sample> = frame.by_ref().take(100).collect();
             feed_all(&mut link, c, now);
-            for s in frame.take(100) {
-                assert!(s.x <= 4095 && s.y <= 4095);
-            }
+            played.extend(frame.take(MAX_FRAME - played.len()));
+            assert!(played.iter().all(|s| s.x <= 4095 && s.y <= 4095));
+            assert_eq!(played, live, "the board's frame is not the engine's");
         } else {
             feed_all(&mut e.split().0, c, now);
         }
@@ -133,6 +142,9 @@ fuzz_target!(|data: &[u8]| {
     // and until then new volume data is `Busy`, which a sender retries):
     // the update a board makes at its next frame boundary comes first.
     now = now.wrapping_add(1);
+    // The slice memory back from the replay (a board's sender would be
+    // answered Busy once, and retry: core/tests/engine.rs).
+    e.replay_frames(false);
     let clean = clean_volume();
     let (delimiter, frames) = clean.split_at(1);
     feed_all(&mut e.split().0, delimiter, now);

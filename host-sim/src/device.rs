@@ -118,7 +118,10 @@ impl<'a> Board<'a> {
     /// # Errors
     /// Invalid engine settings or buffers.
     pub fn new(mem: &'a mut HostBuffers, opts: &DeviceOptions) -> Result<Self> {
-        let engine = Engine::new(opts.engine, mem.buffers()).context("cannot start the engine")?;
+        let mut engine = Engine::new(opts.engine, mem.buffers()).context("cannot start the engine")?;
+        // As the firmware: the slice memory is lent to the frame's replay
+        // while idle, so a volume's first command is answered Busy once.
+        engine.replay_frames(true);
         Ok(Self {
             engine,
             start: Instant::now(),

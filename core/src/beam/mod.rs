@@ -157,6 +157,7 @@
 //! ```
 
 pub mod pace;
+pub mod replay;
 mod scheduler;
 mod stats;
 

@@ -161,6 +161,15 @@ impl Pacer {
         if u64::from(faster) * 8 <= u64::from(self.period) * 7 { self.set(faster) } else { None }
     }
 
+    /// The refill's cost changed for good (the picture's frame is now
+    /// replayed from memory, a few cycles a sample): back to the fastest
+    /// period, a new window begun, rather than waiting [`CALM_HALVES`] to
+    /// speed up. A half that needs it still slows the clock at once.
+    /// Returns the new period when it changes, to be set on the timer.
+    pub fn restart(&mut self) -> Option<u32> {
+        self.set(self.cfg.fastest)
+    }
+
     /// The period at which a half costing `cost` ticks takes 3/4 of it,
     /// within the configured range.
     fn aim(&self, cost: u64) -> u32 {
@@ -282,6 +291,18 @@ mod tests {
         run(&mut pacer, 1, |_| 512 * 168 * 2);
         assert_eq!(pacer.period(), 448);
         pacer
+    }
+
+    #[test]
+    fn a_restart_goes_back_to_the_fastest_period_at_once() {
+        let mut pacer = slowed();
+        assert!(pacer.period() > CFG.fastest);
+        assert_eq!(pacer.restart(), Some(CFG.fastest));
+        assert_eq!(pacer.restart(), None, "already there");
+        // A light refill keeps it; a heavy one slows it again at once.
+        assert_eq!(run(&mut pacer, 10, |_| 20_000), 0);
+        assert_eq!(pacer.period(), CFG.fastest);
+        assert!(pacer.filled(500).is_some());
     }
 
     #[test]

@@ -4,7 +4,7 @@
 use super::{BeamConfig, FrameStats};
 use crate::command::Command;
 use crate::fastmath::{sqrt, sqrt_recip};
-use crate::output::{Beam, RunSink, Sample, SampleSource};
+use crate::output::{Beam, Each, RunSink, Sample, SampleSource, Steps};
 use crate::view::ScreenPoint;
 
 /// A cleaned command: finite, clamped, zero-length lines dropped.
@@ -174,7 +174,7 @@ impl Walk {
 }
 
 /// A run of lit samples along one straight segment, as
-/// [`Scheduler::fill_runs`] hands it to a [`RunSink`]: [`LitSteps::step`]
+/// [`Scheduler::fill_runs`] hands it to a [`RunSink`]: [`Steps::step`]
 /// gives each sample's codes, an add and a shift a coordinate, so a DMA
 /// refill writes the run in a loop of its own.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -184,12 +184,9 @@ pub struct LitSteps {
     y: Walk,
 }
 
-impl LitSteps {
-    /// The codes of the next lit sample. Call it only as many times as the
-    /// run says (past the run's end the codes are meaningless, never a
-    /// panic).
+impl Steps for LitSteps {
     #[inline(always)]
-    pub fn step(&mut self) -> (u16, u16) {
+    fn step(&mut self) -> (u16, u16) {
         (self.x.step(), self.y.step())
     }
 }
@@ -588,26 +585,6 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> SampleSource for Scheduler<I> {
     #[inline]
     fn fill_runs<R: RunSink>(&mut self, max: usize, sink: &mut R) -> usize {
         Scheduler::fill_runs(self, max, sink)
-    }
-}
-
-/// A [`RunSink`] handing each sample of a run to a closure.
-struct Each<F>(F);
-
-impl<F: FnMut(Sample)> RunSink for Each<F> {
-    #[inline(always)]
-    fn repeat(&mut self, s: Sample, n: usize) {
-        for _ in 0..n {
-            (self.0)(s);
-        }
-    }
-
-    #[inline(always)]
-    fn steps(&mut self, steps: &mut LitSteps, n: usize) {
-        for _ in 0..n {
-            let (x, y) = steps.step();
-            (self.0)(Sample::new(x, y, Beam::On));
-        }
     }
 }
 

@@ -58,6 +58,14 @@ pub(super) struct Device<'a> {
     pub(super) board_counts: bool,
     /// A count is due from the board's next played frame.
     pub(super) count_due: bool,
+    /// The board replays a still picture's frames from the slice memory
+    /// ([`Engine::replay_frames`](super::Engine::replay_frames)).
+    pub(super) replay_frames: bool,
+    /// A volume waits for the slice memory lent to the replay: it comes
+    /// back at the next update.
+    pub(super) reclaim: bool,
+    /// When it last came back for a volume (ms), until the volume begins.
+    pub(super) reclaimed_ms: Option<u32>,
     pub(super) refresh_centi_hz: u16,
     pub(super) tx: Deque<u8, TX_QUEUE>,
     pub(super) events: Deque<Event, EVENT_QUEUE>,
@@ -185,7 +193,11 @@ impl Device<'_> {
         match self.session.standing(seq) {
             Standing::Next => {
                 let answer = self.apply(msg, now_ms, back).err();
-                self.session.answered(seq, answer);
+                // Busy is "not now": the command is not taken, and the
+                // same `seq` is expected again (a sender retries it).
+                if answer != Some(NackCode::Busy) {
+                    self.session.answered(seq, answer);
+                }
                 self.answer(seq, answer);
             }
             Standing::Seen(answer) => {
@@ -211,6 +223,12 @@ impl Device<'_> {
         if volume_data && self.commit {
             // The last volume is not the picture yet (the next update makes
             // it so, between frames); its surface is still in the back.
+            return Err(NackCode::Busy);
+        }
+        if matches!(msg, Message::BeginVolume { .. }) && self.stream.lent() {
+            // The slice memory holds the frame on screen, replayed; it
+            // comes back at the next update, between frames.
+            self.reclaim = true;
             return Err(NackCode::Busy);
         }
         match msg {

@@ -41,6 +41,7 @@ mod buffers;
 mod config;
 mod device;
 mod event;
+mod screen;
 mod session;
 mod stream;
 
@@ -51,12 +52,14 @@ pub use buffers::{Buffers, StaticBuffers};
 pub use config::{EngineConfig, EngineError};
 use device::Device;
 pub use event::{AbortReason, Counters, Event};
+pub use screen::{Frame, Projected, Screen};
 pub use session::REPLAY;
 pub use stream::VolumeSpec;
 
+use crate::beam::replay::Replay;
 use crate::beam::{BeamConfig, FrameStats, Scheduler, frame_stats};
-use crate::command::{Command, Point3};
-use crate::view::{Bounds, ScreenPoint, View, ViewTransform};
+use crate::command::Point3;
+use crate::view::{Bounds, View, ViewTransform};
 use crate::wire::{DeviceState, Levels, NackCode, ProtocolDecoder, WireError};
 use heapless::Deque;
 use session::Session;
@@ -83,66 +86,16 @@ pub struct Engine<'a> {
     chain: ChainStats,
     /// Extra scratch for [`path::chain`](crate::path).
     scratch: &'a mut [u8],
+    /// The frame kept to play again, in the slice memory while it is idle
+    /// ([`Engine::replay_frames`]).
+    replay: Replay<'a>,
     generation: u32,
 }
 
-/// The picture half of an [`Engine`] ([`Engine::split`]): the surface on
-/// screen, its view and the beam settings it is played with.
-#[derive(Debug, Clone, Copy)]
-pub struct Screen<'e, 'a> {
-    front: &'e Geometry<'a>,
-    transform: Option<ViewTransform>,
-    beam: BeamConfig,
-}
-
-impl<'e> Screen<'e, '_> {
-    /// One frame, as [`Engine::frame`].
-    pub fn frame(&self) -> Scheduler<Projected<'e>> {
-        Scheduler::new(self.commands(), &self.beam)
-    }
-
-    /// The picture's drawing commands on the screen, in drawing order.
-    pub fn commands(&self) -> Projected<'e> {
-        Projected::new(self.front, self.transform)
-    }
-
-    /// The beam settings.
-    pub fn beam(&self) -> &BeamConfig {
-        &self.beam
-    }
-}
-
-/// The picture's commands projected on the screen (nothing without a
-/// picture).
-#[derive(Debug, Clone)]
-pub struct Projected<'e> {
-    commands: Commands<'e, 'e>,
-    transform: Option<ViewTransform>,
-}
-
-impl<'e> Projected<'e> {
-    /// `front`'s commands through `transform`, taken in the store's own
-    /// fixed point (the transform scaled to it, bit-identical).
-    fn new(front: &'e Geometry<'_>, transform: Option<ViewTransform>) -> Self {
-        let transform = transform.map(|t| t.in_steps_of(front.shift()));
-        Self { commands: front.commands(), transform }
-    }
-}
-
-impl Iterator for Projected<'_> {
-    type Item = Command<ScreenPoint>;
-
-    #[inline]
-    fn next(&mut self) -> Option<Command<ScreenPoint>> {
-        // By reference: the transform is some twenty words, and this runs
-        // for every point of every frame.
-        let t = self.transform.as_ref()?;
-        // Unchecked: the scheduler skips points that are not finite.
-        self.commands
-            .next_packed()
-            .map(|c| c.map(|[x, y, z]| t.project_raw(Point3::new(f32::from(x), f32::from(y), f32::from(z)))))
-    }
-}
+/// How long after a volume took the slice memory back from the replay the
+/// engine waits for it to begin before lending the memory again, in ms: a
+/// sender answered `Busy` retries within a fraction of that.
+pub const RELEND_MS: u32 = 1000;
 
 /// The receiving half of an [`Engine`] ([`Engine::split`]): feeding bytes
 /// while the picture is being drawn.
@@ -193,6 +146,9 @@ impl<'a> Engine<'a> {
                 frame: FrameStats::default(),
                 board_counts: false,
                 count_due: false,
+                replay_frames: false,
+                reclaim: false,
+                reclaimed_ms: None,
                 refresh_centi_hz: 0,
                 tx: Deque::new(),
                 events: Deque::new(),
@@ -203,6 +159,7 @@ impl<'a> Engine<'a> {
             transform: None,
             chain: ChainStats::default(),
             scratch,
+            replay: Replay::new(&mut []),
             generation: 0,
         })
     }
@@ -211,7 +168,15 @@ impl<'a> Engine<'a> {
     /// can play frames while bytes are fed. What the bytes change (a new
     /// volume, view or beam) shows after the next [`Engine::update`].
     pub fn split(&mut self) -> (Link<'_, 'a>, Screen<'_, 'a>) {
-        let screen = Screen { front: &self.front, transform: self.transform, beam: self.dev.beam };
+        let dev = &self.dev;
+        let still = dev.shown.is_some() && dev.spin_deg_per_s == 0.0 && !dev.dirty && !dev.commit;
+        let screen = Screen {
+            front: &self.front,
+            transform: self.transform,
+            beam: self.dev.beam,
+            replay: &mut self.replay,
+            key: still.then_some(self.generation),
+        };
         (Link { decoder: &mut self.decoder, dev: &mut self.dev, back: &mut self.back }, screen)
     }
 
@@ -239,9 +204,13 @@ impl<'a> Engine<'a> {
     #[inline(never)]
     pub fn update(&mut self, now_ms: u32) -> bool {
         self.dev.check_timeout(now_ms);
+        if self.dev.reclaim || self.dev.commit {
+            self.reclaim(now_ms);
+        }
         let mut changed = false;
         if self.dev.commit {
             self.commit();
+            self.dev.reclaimed_ms = None;
             changed = true;
         }
         let spinning = self.dev.spin_deg_per_s != 0.0 && self.dev.shown.is_some();
@@ -259,7 +228,49 @@ impl<'a> Engine<'a> {
             self.generation = self.generation.wrapping_add(1);
             changed = true;
         }
+        self.lend(now_ms);
         changed
+    }
+
+    /// Keep a still picture's frame and play it again from memory
+    /// (`on`), as a board does ([`crate::beam::replay`]): the first frame
+    /// [`Screen::frame`] plays of a picture is recorded into the slice
+    /// memory while no volume needs it, and the frames after it are played
+    /// from the recording, the same samples at a few cycles a sample. A
+    /// volume's first command is then answered `Busy` once (the memory
+    /// comes back at the next [`Engine::update`]). Off by default.
+    pub fn replay_frames(&mut self, on: bool) {
+        self.dev.replay_frames = on;
+        if !on {
+            self.dev.reclaim = true;
+            self.reclaim(0);
+            self.dev.reclaimed_ms = None;
+        }
+    }
+
+    /// The slice memory back from the replay, for a volume or a commit.
+    fn reclaim(&mut self, now_ms: u32) {
+        let dev = &mut self.dev;
+        if dev.stream.lent() {
+            dev.stream.give_back(self.replay.take());
+            dev.reclaimed_ms = dev.reclaim.then_some(now_ms);
+        }
+        dev.reclaim = false;
+    }
+
+    /// Lend the slice memory to the replay while nothing needs it: a picture
+    /// shown, no volume arriving or waiting, none asked for in the last
+    /// [`RELEND_MS`].
+    fn lend(&mut self, now_ms: u32) {
+        let dev = &mut self.dev;
+        let waiting = dev.reclaimed_ms.is_some_and(|t| now_ms.wrapping_sub(t) < RELEND_MS);
+        if !dev.replay_frames || dev.shown.is_none() || dev.commit || dev.reclaim || waiting {
+            return;
+        }
+        if let Some(mem) = dev.stream.lend() {
+            self.replay = Replay::new(mem);
+            dev.reclaimed_ms = None;
+        }
     }
 
     /// The received surface becomes the picture.
@@ -392,6 +403,9 @@ impl<'a> Engine<'a> {
     /// [`Engine::frame`], to its end): its statistics count the picture, if
     /// a count is due ([`Engine::count_while_playing`]). A frame of another
     /// picture than the one [`Engine::update`] made last must not be passed.
+    // Never inlined: called once a frame, it costs nothing, and a board's
+    // profile then finds where each frame ended (`scripts/firmware-bench`).
+    #[inline(never)]
     pub fn played(&mut self, frame: FrameStats) {
         if core::mem::take(&mut self.dev.count_due) {
             self.counted(frame);

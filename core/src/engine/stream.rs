@@ -121,8 +121,11 @@ pub(crate) struct Job {
 /// more points.
 #[derive(Debug)]
 pub(crate) struct Stream<'a> {
-    /// Both slices, one after the other, and the spill.
+    /// Both slices, one after the other, and the spill (empty while lent:
+    /// [`Stream::lend`]).
     slots: &'a mut [u8],
+    /// Bytes of `slots` when not lent.
+    capacity: usize,
     rows: [&'a mut [f32]; 2],
     /// The slot receiving slice `z`; the other holds slice `z - 1`.
     cur: usize,
@@ -272,12 +275,34 @@ fn widen<const N: usize>(
 
 impl<'a> Stream<'a> {
     pub(crate) fn new(slots: &'a mut [u8], rows: [&'a mut [f32]; 2]) -> Self {
-        Self { slots, rows, cur: 0, transfer: None, spill: None }
+        let capacity = slots.len();
+        Self { slots, capacity, rows, cur: 0, transfer: None, spill: None }
     }
 
-    /// Bytes one slice may hold.
+    /// Bytes one slice may hold (lent or not).
     pub(crate) fn slice_capacity(&self) -> usize {
-        self.slots.len() / 2
+        self.capacity / 2
+    }
+
+    /// The slice memory, lent while nothing needs it: no transfer, no
+    /// spill waiting for its commit. `None` then, or if already lent.
+    pub(crate) fn lend(&mut self) -> Option<&'a mut [u8]> {
+        if self.transfer.is_some() || self.spill.is_some() || self.lent() {
+            return None;
+        }
+        Some(core::mem::take(&mut self.slots))
+    }
+
+    /// Whether the slice memory is lent ([`Stream::lend`]).
+    pub(crate) fn lent(&self) -> bool {
+        self.slots.len() < self.capacity
+    }
+
+    /// The lent slice memory back (what [`Stream::lend`] gave).
+    pub(crate) fn give_back(&mut self, slots: &'a mut [u8]) {
+        if self.lent() && slots.len() == self.capacity {
+            self.slots = slots;
+        }
     }
 
     /// The slice memory as scratch, while no transfer needs it (and the

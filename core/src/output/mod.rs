@@ -70,9 +70,40 @@ pub trait RunSink {
     /// `n` samples equal to `s`.
     fn repeat(&mut self, s: Sample, n: usize);
 
-    /// `n` lit samples along a straight line, each from
-    /// [`LitSteps::step`](crate::beam::LitSteps::step).
-    fn steps(&mut self, steps: &mut crate::beam::LitSteps, n: usize);
+    /// `n` lit samples, each from [`Steps::step`]: a segment's steps
+    /// ([`LitSteps`](crate::beam::LitSteps)) or a replayed frame's
+    /// ([`Deltas`](crate::beam::replay::Deltas)).
+    fn steps<S: Steps>(&mut self, steps: &mut S, n: usize);
+}
+
+/// A run of lit samples, one [`Steps::step`] a sample: what
+/// [`RunSink::steps`] takes. Cloned, it gives the same samples again (a
+/// recording sink reads a run before handing it on).
+pub trait Steps: Clone {
+    /// The codes of the next lit sample. Called only as many times as the
+    /// run says (past its end the codes are meaningless, never a panic).
+    fn step(&mut self) -> (u16, u16);
+}
+
+/// A [`RunSink`] handing each sample of a run to a closure: how a
+/// [`SampleSource`] of runs gives its samples one by one.
+pub(crate) struct Each<F>(pub F);
+
+impl<F: FnMut(Sample)> RunSink for Each<F> {
+    #[inline(always)]
+    fn repeat(&mut self, s: Sample, n: usize) {
+        for _ in 0..n {
+            (self.0)(s);
+        }
+    }
+
+    #[inline(always)]
+    fn steps<S: Steps>(&mut self, steps: &mut S, n: usize) {
+        for _ in 0..n {
+            let (x, y) = steps.step();
+            (self.0)(Sample::new(x, y, Beam::On));
+        }
+    }
 }
 
 /// Any iterator of samples as a [`SampleSource`], one `next` at a time.

@@ -23,7 +23,9 @@
 //!   an unreadable log;
 //! - `isoscope-fw-ref inject HOST:PORT` talks to the board (QEMU's USART2)
 //!   over TCP and leaves it a damaged, abandoned transfer: hello, a
-//!   32x32x32 `f32` volume begun and three full slices sent (each
+//!   32x32x32 `f32` volume begun (sent again while the board answers
+//!   `Busy`: its slice memory holds the replayed picture until its next
+//!   frame boundary) and three full slices sent (each
 //!   acknowledged: contoured), then the fourth slice's first frame cut in
 //!   half, random bytes, and a frame with a corrupt CRC. The next sender's
 //!   hello abandons that transfer; the picture must not change.
@@ -412,11 +414,35 @@ fn inject(args: &[String]) -> Result<bool, String> {
         }
     }
     let last = seq0 + frames.len() as u16 - 1;
-    for f in &frames {
+    // The begin alone first: a board replaying its picture from the slice
+    // memory answers it Busy until its next frame boundary gives the
+    // memory back, and takes it when sent again.
+    let mut nacks = Vec::new();
+    let mut begun = false;
+    for _ in 0..20 {
+        s.write_all(&frames[0]).map_err(|e| e.to_string())?;
+        let mut busy = false;
+        begun = listen(&mut s, &mut dec, Duration::from_secs(2), |r| match r {
+            Ok(Message::Ack { seq }) => seq == seq0,
+            Ok(Message::Nack { seq, code }) => {
+                nacks.push(format!("{seq}:{code:?}"));
+                busy = code == isoscope_core::wire::NackCode::Busy;
+                busy
+            }
+            _ => false,
+        })? && !busy;
+        if begun {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    if !begun {
+        return Err(format!("the board never took the volume's begin (nacks: {nacks:?})"));
+    }
+    for f in &frames[1..] {
         s.write_all(f).map_err(|e| e.to_string())?;
     }
-    let mut acked = 0;
-    let mut nacks = Vec::new();
+    let mut acked = 1;
     let all = listen(&mut s, &mut dec, Duration::from_secs(20), |r| match r {
         Ok(Message::Ack { seq }) => {
             acked += 1;

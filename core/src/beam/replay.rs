@@ -1,0 +1,589 @@
+//! A frame kept to play again.
+//!
+//! While a picture stands still (a still view, the beam settings unchanged,
+//! no volume arriving) every frame is the same samples. A board records the
+//! first frame it plays of such a picture into memory that is idle
+//! meanwhile ([`Replay`]), and from the next frame on plays the recording
+//! ([`Player`]): a refill then costs a few cycles a sample instead of the
+//! scheduler's work a command, which on a dense picture is several times
+//! what a sample may take at the full sample clock. The recording is
+//! exact: the same samples, bit for bit, as the frame it was made from.
+//!
+//! # Format
+//!
+//! A recording is a sequence of runs, one after the other:
+//!
+//! | bytes | samples |
+//! |---|---|
+//! | `0`, `x` (u16 LE), `y` (u16 LE), `beam` (`0` off, `1` on), `n` (u16 LE, at least 1) | `n` samples at `(x, y)` |
+//! | `h` (`1 ..= 255`), then `h` pairs `dx`, `dy` (`i8`) | `h` lit samples, each the sample before it moved by `(dx, dy)` |
+//!
+//! The position before a frame's first sample is `(0, 0)`. A segment's
+//! lit steps move the beam by about the beam speed
+//! ([`BeamConfig::lit_step`](super::BeamConfig::lit_step), 17 LSB by
+//! default), so the lines, most of a frame, take two bytes a sample and a
+//! byte more for each 255; a jump's settle or a dwell takes eight bytes.
+//! A frame that does not fit the memory is played live, frame after frame
+//! (the recording is tried once a picture).
+//!
+//! ```
+//! use isoscope_core::beam::replay::Replay;
+//! use isoscope_core::output::{Beam, Sample, SampleSource, Samples};
+//!
+//! let frame = [
+//!     Sample::new(100, 100, Beam::Off),
+//!     Sample::new(100, 100, Beam::Off),
+//!     Sample::new(117, 100, Beam::On),
+//!     Sample::new(134, 104, Beam::On),
+//! ];
+//! let mut mem = [0u8; 64];
+//! let mut replay = Replay::new(&mut mem);
+//! let mut played = Vec::new();
+//! let mut live = Samples(frame.iter().copied());
+//! let mut rec = replay.record(7).unwrap();
+//! let n = rec.fill_with(&mut live, 16, |s| played.push(s));
+//! assert_eq!(n, 4);
+//! rec.finish(Default::default());
+//! assert_eq!(played, frame);
+//! // Picture 7 is kept; from now on it plays from memory.
+//! let again: Vec<_> = replay.play(7).unwrap().collect();
+//! assert_eq!(again, frame);
+//! assert_eq!(replay.len(), 8 + 1 + 2 + 2);
+//! ```
+
+use super::FrameStats;
+use crate::output::{Beam, Each, RunSink, Sample, SampleSource, Steps};
+
+/// The most samples one repeat run holds; longer runs are split.
+const MAX_REPEAT: usize = u16::MAX as usize;
+
+/// The most lit samples one delta run holds.
+const MAX_DELTAS: u8 = u8::MAX;
+
+/// Lit repeats of at most this many samples are kept as steps of no
+/// length (two bytes each) rather than as a repeat run (eight).
+const SHORT_DWELL: usize = 3;
+
+/// A picture's frame kept in borrowed memory, to play again. See the
+/// [module docs](self).
+///
+/// The memory is lent for as long as it is idle and taken back
+/// ([`Replay::take`]) when it is needed again; the frame is the picture
+/// that a key names (an engine's generation), so a recording of an older
+/// picture is never played for a newer one.
+#[derive(Debug)]
+pub struct Replay<'m> {
+    mem: &'m mut [u8],
+    held: Held,
+}
+
+/// What a [`Replay`]'s memory holds.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Held {
+    /// Nothing (or a recording never finished).
+    Nothing,
+    /// The frame of picture `key`: the first `len` bytes of the memory, and
+    /// the frame's statistics.
+    Frame { key: u32, len: usize, stats: FrameStats },
+    /// Picture `key`'s frame did not fit.
+    TooLong { key: u32 },
+}
+
+impl<'m> Replay<'m> {
+    /// A replay over `mem` (any size; nothing fits in none).
+    pub const fn new(mem: &'m mut [u8]) -> Self {
+        Self { mem, held: Held::Nothing }
+    }
+
+    /// Bytes of memory.
+    pub fn capacity(&self) -> usize {
+        self.mem.len()
+    }
+
+    /// Bytes of the recording held (0 without one).
+    pub fn len(&self) -> usize {
+        match self.held {
+            Held::Frame { len, .. } => len,
+            _ => 0,
+        }
+    }
+
+    /// Whether no recording is held.
+    pub fn is_empty(&self) -> bool {
+        !matches!(self.held, Held::Frame { .. })
+    }
+
+    /// Take the memory back: the replay is left holding nothing, in none.
+    pub fn take(&mut self) -> &'m mut [u8] {
+        self.held = Held::Nothing;
+        core::mem::take(&mut self.mem)
+    }
+
+    /// Whether picture `key`'s frame is held, to play.
+    pub fn holds(&self, key: u32) -> bool {
+        matches!(self.held, Held::Frame { key: k, .. } if k == key)
+    }
+
+    /// Whether picture `key`'s frame was found too long for the memory.
+    pub fn too_long(&self, key: u32) -> bool {
+        self.held == Held::TooLong { key }
+    }
+
+    /// Play picture `key`'s frame, if it is the one held.
+    pub fn play(&self, key: u32) -> Option<Player<'_>> {
+        match self.held {
+            Held::Frame { key: k, len, stats } if k == key => {
+                let rest = self.mem.get(..len)?;
+                Some(Player { rest, x: 0, y: 0, run: Run::Done, stats })
+            }
+            _ => None,
+        }
+    }
+
+    /// Record picture `key`'s frame as it plays, in place of what the
+    /// memory held; `None` without memory, or if that frame was found too
+    /// long before (it is not tried again).
+    pub fn record(&mut self, key: u32) -> Option<Recorder<'_, 'm>> {
+        if self.mem.is_empty() || self.too_long(key) {
+            return None;
+        }
+        self.held = Held::Nothing;
+        Some(Recorder { replay: self, key, enc: Encoder::default(), done: false })
+    }
+}
+
+/// Records a frame as it is played ([`Replay::record`]): every sample
+/// handed on is also written to the replay's memory. The recording is kept
+/// once [`Recorder::finish`] says the frame ended.
+#[derive(Debug)]
+pub struct Recorder<'r, 'm> {
+    replay: &'r mut Replay<'m>,
+    key: u32,
+    enc: Encoder,
+    done: bool,
+}
+
+impl Recorder<'_, '_> {
+    /// Take at most `max` samples of `live` into `sink` (as
+    /// [`SampleSource::fill_runs`], the same runs), recording them; returns
+    /// how many.
+    pub fn fill_runs<S: SampleSource, R: RunSink>(
+        &mut self,
+        live: &mut S,
+        max: usize,
+        sink: &mut R,
+    ) -> usize {
+        if self.done {
+            return live.fill_runs(max, sink);
+        }
+        let mut tee = Tee { sink, enc: &mut self.enc, mem: &mut *self.replay.mem };
+        live.fill_runs(max, &mut tee)
+    }
+
+    /// [`Recorder::fill_runs`], a sample at a time to `put`.
+    pub fn fill_with<S: SampleSource, F: FnMut(Sample)>(
+        &mut self,
+        live: &mut S,
+        max: usize,
+        put: F,
+    ) -> usize {
+        self.fill_runs(live, max, &mut Each(put))
+    }
+
+    /// The frame ended, with statistics `stats` (those a replay reports):
+    /// keep the recording if it fit. Later calls change nothing.
+    pub fn finish(&mut self, stats: FrameStats) {
+        if core::mem::replace(&mut self.done, true) {
+            return;
+        }
+        let key = self.key;
+        self.replay.held =
+            if self.enc.full { Held::TooLong { key } } else { Held::Frame { key, len: self.enc.len, stats } };
+    }
+}
+
+/// Where a recording stands.
+#[derive(Debug, Default, Clone, Copy)]
+struct Encoder {
+    /// Bytes written.
+    len: usize,
+    /// The run still open, which the next samples may extend.
+    open: Open,
+    /// The last sample.
+    last: Sample,
+    /// A run did not fit: the rest is not written.
+    full: bool,
+}
+
+/// The run an [`Encoder`] may extend.
+#[derive(Debug, Default, Clone, Copy)]
+enum Open {
+    #[default]
+    None,
+    /// A delta run whose count is at this byte.
+    Deltas(usize),
+    /// A repeat run of the last sample that starts at this byte.
+    Repeat(usize),
+}
+
+impl Encoder {
+    /// Append `bytes`, or mark the recording full.
+    #[inline]
+    fn put<const N: usize>(&mut self, mem: &mut [u8], bytes: [u8; N]) -> bool {
+        let end = self.len.saturating_add(N);
+        match mem.get_mut(self.len..end) {
+            Some(to) if !self.full => {
+                to.copy_from_slice(&bytes);
+                self.len = end;
+                true
+            }
+            _ => {
+                self.full = true;
+                false
+            }
+        }
+    }
+
+    /// One lit sample at `(x, y)`.
+    #[inline]
+    fn lit(&mut self, mem: &mut [u8], x: u16, y: u16) {
+        let s = Sample::new(x, y, Beam::On);
+        let (dx, dy) = (i32::from(x) - i32::from(self.last.x), i32::from(y) - i32::from(self.last.y));
+        let (Ok(dx), Ok(dy)) = (i8::try_from(dx), i8::try_from(dy)) else {
+            return self.same(mem, s, 1);
+        };
+        let open = match self.open {
+            Open::Deltas(at) => mem.get_mut(at).filter(|h| **h < MAX_DELTAS),
+            _ => None,
+        };
+        match open {
+            Some(h) => *h += 1,
+            None => {
+                self.open = Open::Deltas(self.len);
+                self.put(mem, [1]);
+            }
+        }
+        self.put(mem, [dx as u8, dy as u8]);
+        self.last = s;
+    }
+
+    /// `n` samples equal to `s`: a short dwell of a lit beam as steps of
+    /// no length, the rest as a repeat run.
+    fn repeat(&mut self, mem: &mut [u8], s: Sample, n: usize) {
+        if s.beam == Beam::On && n <= SHORT_DWELL {
+            for _ in 0..n {
+                self.lit(mem, s.x, s.y);
+            }
+        } else {
+            self.same(mem, s, n);
+        }
+    }
+
+    /// `n` samples equal to `s` as repeat runs (extending the open one if
+    /// it repeats `s`).
+    fn same(&mut self, mem: &mut [u8], s: Sample, n: usize) {
+        let mut left = n;
+        if let Open::Repeat(at) = self.open
+            && self.last == s
+            && let Some(count) = mem.get_mut(at + 6..at + 8).and_then(|c| <&mut [u8; 2]>::try_from(c).ok())
+        {
+            let had = usize::from(u16::from_le_bytes(*count));
+            let k = left.min(MAX_REPEAT - had.min(MAX_REPEAT));
+            count.copy_from_slice(&((had + k) as u16).to_le_bytes()); // had + k <= u16::MAX
+            left -= k;
+        }
+        let [xl, xh] = s.x.to_le_bytes();
+        let [yl, yh] = s.y.to_le_bytes();
+        let beam = u8::from(s.beam == Beam::On);
+        while left > 0 {
+            let k = left.min(MAX_REPEAT);
+            let [nl, nh] = (k as u16).to_le_bytes(); // k <= u16::MAX
+            self.open = Open::Repeat(self.len);
+            if !self.put(mem, [0, xl, xh, yl, yh, beam, nl, nh]) {
+                break;
+            }
+            left -= k;
+        }
+        self.last = s;
+    }
+}
+
+/// A [`RunSink`] that records every run into a replay's memory and hands it
+/// on.
+struct Tee<'t, R> {
+    sink: &'t mut R,
+    enc: &'t mut Encoder,
+    mem: &'t mut [u8],
+}
+
+impl<R: RunSink> RunSink for Tee<'_, R> {
+    fn repeat(&mut self, s: Sample, n: usize) {
+        self.enc.repeat(self.mem, s, n);
+        self.sink.repeat(s, n);
+    }
+
+    fn steps<S: Steps>(&mut self, steps: &mut S, n: usize) {
+        let mut copy = steps.clone();
+        for _ in 0..n {
+            let (x, y) = copy.step();
+            self.enc.lit(self.mem, x, y);
+        }
+        self.sink.steps(steps, n);
+    }
+}
+
+/// A kept frame played again ([`Replay::play`]): a [`SampleSource`] (and
+/// an iterator) of the recorded samples.
+#[derive(Debug, Clone)]
+pub struct Player<'r> {
+    /// The runs not yet begun.
+    rest: &'r [u8],
+    /// The last sample's position.
+    x: u16,
+    y: u16,
+    /// The run being played.
+    run: Run,
+    stats: FrameStats,
+}
+
+/// The run a [`Player`] is in.
+#[derive(Debug, Clone, Copy)]
+enum Run {
+    /// Between runs.
+    Done,
+    /// This many more samples equal to this one.
+    Same(Sample, usize),
+    /// This many more lit samples from deltas (at the start of `rest`).
+    Lit(usize),
+}
+
+impl Player<'_> {
+    /// The statistics of the frame as it was recorded.
+    pub fn stats(&self) -> FrameStats {
+        self.stats
+    }
+}
+
+impl SampleSource for Player<'_> {
+    fn fill_with<F: FnMut(Sample)>(&mut self, max: usize, put: F) -> usize {
+        self.fill_runs(max, &mut Each(put))
+    }
+
+    fn fill_runs<R: RunSink>(&mut self, max: usize, sink: &mut R) -> usize {
+        let mut done = 0;
+        while done < max {
+            let room = max - done;
+            match self.run {
+                Run::Same(s, left) if left > 0 => {
+                    let n = left.min(room);
+                    sink.repeat(s, n);
+                    self.run = Run::Same(s, left - n);
+                    done += n;
+                }
+                Run::Lit(left) if left > 0 => {
+                    let n = left.min(room);
+                    let (pairs, _) = self.rest.as_chunks::<2>();
+                    // A recording is whole (the encoder wrote it); a cut
+                    // one ends here rather than inventing samples.
+                    let (Some(run), Some(rest)) = (pairs.get(..n), self.rest.get(2 * n..)) else {
+                        self.rest = &[];
+                        self.run = Run::Done;
+                        break;
+                    };
+                    let mut deltas = Deltas { pairs: run.iter(), x: self.x, y: self.y };
+                    sink.steps(&mut deltas, n);
+                    (self.x, self.y) = (deltas.x, deltas.y);
+                    self.rest = rest;
+                    self.run = Run::Lit(left - n);
+                    done += n;
+                }
+                _ => {
+                    let Some((&head, rest)) = self.rest.split_first() else { break };
+                    if head != 0 {
+                        self.run = Run::Lit(usize::from(head));
+                        self.rest = rest;
+                        continue;
+                    }
+                    let Some(([xl, xh, yl, yh, beam, nl, nh], rest)) = rest.split_first_chunk::<7>() else {
+                        self.rest = &[];
+                        break;
+                    };
+                    let beam = if *beam == 0 { Beam::Off } else { Beam::On };
+                    let s = Sample::new(u16::from_le_bytes([*xl, *xh]), u16::from_le_bytes([*yl, *yh]), beam);
+                    (self.x, self.y) = (s.x, s.y);
+                    self.run = Run::Same(s, usize::from(u16::from_le_bytes([*nl, *nh])));
+                    self.rest = rest;
+                }
+            }
+        }
+        done
+    }
+}
+
+impl Iterator for Player<'_> {
+    type Item = Sample;
+
+    fn next(&mut self) -> Option<Sample> {
+        let mut out = None;
+        self.fill_with(1, |s| out = Some(s));
+        out
+    }
+}
+
+impl core::iter::FusedIterator for Player<'_> {}
+
+/// The lit samples of a replayed delta run, as [`RunSink::steps`] takes
+/// them: an add a coordinate a sample.
+#[derive(Debug, Clone)]
+pub struct Deltas<'r> {
+    pairs: core::slice::Iter<'r, [u8; 2]>,
+    x: u16,
+    y: u16,
+}
+
+impl Steps for Deltas<'_> {
+    #[inline(always)]
+    fn step(&mut self) -> (u16, u16) {
+        if let Some(&[dx, dy]) = self.pairs.next() {
+            self.x = self.x.wrapping_add_signed(i16::from(dx as i8));
+            self.y = self.y.wrapping_add_signed(i16::from(dy as i8));
+        }
+        (self.x, self.y)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::output::Samples;
+    use proptest::prelude::*;
+    use std::vec::Vec;
+
+    /// Record `frame` into `cap` bytes through runs handed out `chunk`
+    /// samples at a time; the samples handed on, and the replay.
+    fn record(frame: &[Sample], cap: usize, chunk: usize) -> (Vec<Sample>, Option<Vec<Sample>>, usize) {
+        let mut mem = std::vec![0u8; cap];
+        let mut replay = Replay::new(&mut mem);
+        let mut live = Samples(frame.iter().copied());
+        let mut played = Vec::new();
+        let mut rec = replay.record(1).unwrap();
+        while rec.fill_with(&mut live, chunk, |s| played.push(s)) == chunk {}
+        rec.finish(FrameStats { samples: frame.len() as u64, ..FrameStats::default() });
+        let len = replay.len();
+        let again = replay.play(1).map(|p| {
+            // Refilled in chunks too.
+            let mut p = p;
+            let mut out = Vec::new();
+            while p.fill_with(chunk, |s| out.push(s)) == chunk {}
+            out
+        });
+        (played, again, len)
+    }
+
+    fn sample() -> impl Strategy<Value = Sample> {
+        // Mostly small moves of a lit beam, some jumps, some repeats, in a
+        // 12-bit range with codes near both ends.
+        prop_oneof![
+            (0u16..4096, 0u16..4096, any::<bool>()).prop_map(|(x, y, on)| Sample::new(
+                x,
+                y,
+                if on { Beam::On } else { Beam::Off }
+            )),
+            (0u16..40, 0u16..40).prop_map(|(x, y)| Sample::new(x, y, Beam::On)),
+            (4050u16..4096, 4050u16..4096).prop_map(|(x, y)| Sample::new(x, y, Beam::On)),
+        ]
+    }
+
+    /// Frames of runs: a start sample repeated, or a walk of small steps.
+    fn frame() -> impl Strategy<Value = Vec<Sample>> {
+        prop::collection::vec((sample(), 1usize..400, -130i32..130, -130i32..130, any::<bool>()), 0..40)
+            .prop_map(|runs| {
+                let mut out = Vec::new();
+                for (s, n, dx, dy, walk) in runs {
+                    for k in 0..n as i32 {
+                        let t = if walk { k } else { 0 };
+                        let x = (i32::from(s.x) + t * dx / 16).clamp(0, 65535) as u16;
+                        let y = (i32::from(s.y) + t * dy / 16).clamp(0, 65535) as u16;
+                        out.push(Sample::new(x, y, s.beam));
+                    }
+                }
+                out
+            })
+    }
+
+    proptest! {
+        /// What is played while recording, and every replay, is the frame.
+        #[test]
+        fn a_replay_is_the_recorded_frame(frame in frame(), chunk in 1usize..600) {
+            let (played, again, _) = record(&frame, 1 << 16, chunk);
+            prop_assert_eq!(&played, &frame);
+            prop_assert_eq!(again.as_ref(), Some(&frame));
+        }
+
+        /// A frame the memory cannot hold plays whole, and is not kept.
+        #[test]
+        fn a_frame_too_long_is_played_not_kept(frame in frame(), chunk in 1usize..600) {
+            let (_, _, need) = record(&frame, 1 << 16, chunk);
+            prop_assume!(need > 0);
+            let (played, again, len) = record(&frame, need - 1, chunk);
+            prop_assert_eq!(&played, &frame);
+            prop_assert_eq!(again, None);
+            prop_assert_eq!(len, 0);
+        }
+    }
+
+    #[test]
+    fn long_runs_split_and_replay() {
+        let mut frame = std::vec![Sample::new(5, 6, Beam::Off); 70_000];
+        frame.extend((0..600).map(|k| Sample::new(k * 3, 4000 - k * 5, Beam::On)));
+        let (played, again, len) = record(&frame, 4096, 512);
+        assert_eq!(played, frame);
+        assert_eq!(again, Some(frame));
+        // Two repeats for the settle, one for the first lit sample (too far
+        // from it for a delta), then three delta runs of 255 + 255 + 89.
+        assert_eq!(len, 3 * 8 + 3 + 2 * 599);
+    }
+
+    #[test]
+    fn a_frame_too_long_is_tried_once() {
+        let frame: Vec<_> = (0..100).map(|k| Sample::new(k * 200, 0, Beam::Off)).collect();
+        let mut mem = [0u8; 64];
+        let mut replay = Replay::new(&mut mem);
+        let mut rec = replay.record(3).unwrap();
+        rec.fill_with(&mut Samples(frame.iter().copied()), 1000, |_| {});
+        rec.finish(FrameStats::default());
+        assert!(replay.too_long(3));
+        assert!(replay.record(3).is_none());
+        assert!(replay.play(3).is_none());
+        // Another picture is tried.
+        assert!(replay.record(4).is_some());
+    }
+
+    #[test]
+    fn an_unfinished_recording_is_not_played() {
+        let frame = [Sample::new(1, 2, Beam::On); 10];
+        let mut mem = [0u8; 64];
+        let mut replay = Replay::new(&mut mem);
+        let mut rec = replay.record(3).unwrap();
+        rec.fill_with(&mut Samples(frame.iter().copied()), 5, |_| {});
+        // The recorder goes without `finish`: the frame was cut short.
+        assert!(replay.play(3).is_none());
+        assert!(replay.is_empty());
+    }
+
+    #[test]
+    fn a_replay_of_another_picture_is_not_played() {
+        let frame = [Sample::new(1, 2, Beam::On); 10];
+        let mut mem = [0u8; 64];
+        let mut replay = Replay::new(&mut mem);
+        let mut rec = replay.record(3).unwrap();
+        rec.fill_with(&mut Samples(frame.iter().copied()), 50, |_| {});
+        rec.finish(FrameStats::default());
+        assert!(replay.play(3).is_some());
+        assert!(replay.play(4).is_none());
+        let mem = replay.take();
+        assert_eq!(mem.len(), 64);
+        assert!(replay.play(3).is_none());
+        assert!(replay.record(5).is_none(), "no memory: nothing recorded");
+    }
+}
