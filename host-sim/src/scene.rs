@@ -14,11 +14,12 @@ use crate::board::{HostBuffers, InProcess, Loaded, Refused, check_levels, host_c
 use crate::link::{SendConfig, WireVolume};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
+use isoscope_core::beam::replay::Replay;
 use isoscope_core::beam::{BeamConfig, FrameStats};
 use isoscope_core::command::Command;
 use isoscope_core::contour::grid::Plane;
 use isoscope_core::engine::{Board, Capacity, ChainStats, EngineConfig};
-use isoscope_core::output::Sample;
+use isoscope_core::output::{Sample, SampleSource};
 use isoscope_core::view::{ScreenPoint, View};
 use isoscope_core::wire::{AXIS_X, AXIS_Y, AXIS_Z, MAX_CHUNK, NackCode};
 
@@ -161,6 +162,9 @@ pub struct Scene {
     /// Seconds: the transfer (decoding and contouring, slice by slice), and
     /// the commit (stitch, order, count a frame).
     pub seconds: [f64; 2],
+    /// Bytes of the frame recorded for replay ([`isoscope_core::beam::replay`]):
+    /// what a board keeps of a still picture to play it at full rate.
+    pub replay_bytes: usize,
 }
 
 /// The memory to start with for `vol` under `memory`.
@@ -232,6 +236,7 @@ pub fn scene_of(board: &InProcess<'_>, capacity: Capacity, cfg: &SceneConfig) ->
     let mut frame = engine.frame();
     let samples: Vec<Sample> = frame.by_ref().collect();
     let surface = engine.surface();
+    let replay_bytes = replay_bytes(engine.frame(), samples.len());
     Scene {
         samples,
         commands: engine.commands().collect(),
@@ -247,7 +252,20 @@ pub fn scene_of(board: &InProcess<'_>, capacity: Capacity, cfg: &SceneConfig) ->
         },
         sample_rate_hz: cfg.sample_rate_hz,
         seconds: board.loaded().seconds,
+        replay_bytes,
     }
+}
+
+/// Bytes a board's replay of `frame` (of `samples` samples) takes, as the
+/// core records it.
+fn replay_bytes(mut frame: impl SampleSource, samples: usize) -> usize {
+    // A repeat run, the longest a sample takes, is 8 bytes.
+    let mut mem = vec![0u8; 8 * samples + 8];
+    let mut replay = Replay::new(&mut mem);
+    let Some(mut rec) = replay.record(0) else { return 0 };
+    rec.fill_with(&mut frame, usize::MAX, |_| {});
+    rec.finish(FrameStats::default());
+    replay.len()
 }
 
 impl Scene {
@@ -296,10 +314,28 @@ impl Scene {
             };
             out.push(format!("note: {holder} holds less than this surface: {}; {advice}", what.join(", ")));
         }
+        if let Some(b) = self.board
+            && self.replay_bytes > self.replay_capacity()
+        {
+            out.push(format!(
+                "note: the {} board cannot keep this frame to replay it ({} bytes, its slice memory holds {}): \
+                 it schedules every frame anew, and slows its sample clock for it (fewer points or samples \
+                 fit: --every, --axes, fewer levels)",
+                b.name,
+                self.replay_bytes,
+                self.replay_capacity()
+            ));
+        }
         if self.frame.lit_samples == 0 {
             out.push("warning: nothing is drawn (no contour at these levels on these slices)".into());
         }
         out
+    }
+
+    /// Bytes a board lends to the replay: its two slice buffers (none on
+    /// the host).
+    pub fn replay_capacity(&self) -> usize {
+        if self.board.is_some() { 2 * self.capacity.slice_bytes } else { 0 }
     }
 
     /// The frame statistics as `key=value` lines.
@@ -329,6 +365,10 @@ impl Scene {
         kv("lit_samples", f.lit_samples.to_string());
         kv("sample_rate_hz", self.sample_rate_hz.to_string());
         kv("fps", format!("{:.2}", self.fps()));
+        if self.board.is_some() {
+            kv("replay_bytes", self.replay_bytes.to_string());
+            kv("replay_capacity_bytes", self.replay_capacity().to_string());
+        }
         kv("duplicate_segments", c.duplicate_segments.to_string());
         kv("merged_points", c.merged.to_string());
         kv("transfer_ms", format!("{:.3}", self.seconds[0] * 1e3));

@@ -92,3 +92,40 @@ fn brain_mri_holds_its_blank_figure() {
     check(&board, 0.2611);
     assert!(board.remarks().iter().any(|r| r.contains("pieces were dropped")));
 }
+
+/// Every standard scene, as the f407 draws it, keeps its frame in the
+/// board's slice memory to replay at the full sample clock, and that
+/// frame is short enough for a 55 Hz refresh at 1 MS/s.
+#[test]
+fn the_board_replays_every_standard_scene_at_55_hz() {
+    let scenes = [
+        ("hydrogen 32", demo(Demo::Hydrogen, 32, F407)),
+        ("gyroid 32", demo(Demo::Gyroid, 32, F407)),
+        ("torus 32", demo(Demo::Torus, 32, F407)),
+        ("MRI head", brain(F407)),
+    ];
+    for (name, s) in &scenes {
+        assert_eq!(s.replay_capacity(), 65_536, "{name}");
+        assert!(
+            s.replay_bytes > 0 && s.replay_bytes <= s.replay_capacity(),
+            "{name}: {} bytes",
+            s.replay_bytes
+        );
+        assert!(s.fps() >= 55.0, "{name}: {} Hz", s.fps());
+        assert!(!s.remarks().iter().any(|r| r.contains("replay")), "{name}: {:?}", s.remarks());
+    }
+    // Hydrogen 32^3, the largest: two bytes a lit step, and a little more.
+    let hydrogen = &scenes[0].1;
+    assert!(hydrogen.replay_bytes < 2 * hydrogen.samples.len() + 1024, "{}", hydrogen.replay_bytes);
+    // The host lends nothing.
+    let host = demo(Demo::Torus, 16, Memory::Host);
+    assert_eq!(host.replay_capacity(), 0);
+    assert!(!host.report().contains("replay_bytes"));
+    // A frame too long to keep is said to be.
+    let long = Scene { replay_bytes: 70_000, ..demo(Demo::Torus, 16, F407) };
+    let note = long.remarks().join("\n");
+    assert!(
+        note.contains("cannot keep this frame to replay it (70000 bytes, its slice memory holds 65536)"),
+        "{note}"
+    );
+}
