@@ -623,6 +623,23 @@ proptest! {
             }
             prop_assert_eq!(&again, &want);
         }
+        // One byte short: played whole all the same, and not kept.
+        let need = replay.len();
+        prop_assume!(need > 0);
+        let mut mem = vec![0u8; need - 1];
+        let mut replay = Replay::new(&mut mem);
+        let mut sch = Scheduler::new(cmds.iter().copied(), &cfg);
+        let mut rec = replay.record(9).expect("memory");
+        let mut got = Vec::new();
+        for &n in chunks.iter().cycle() {
+            if rec.fill_runs(&mut sch, n, &mut Expand(&mut got)) < n {
+                break;
+            }
+        }
+        rec.finish(sch.stats());
+        prop_assert_eq!(&got, &want);
+        prop_assert!(replay.play(9).is_none());
+        prop_assert!(replay.too_long(9));
     }
 
     /// Filling in runs (as the firmware refills its DMA halves, in chunks

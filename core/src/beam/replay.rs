@@ -267,6 +267,71 @@ impl Encoder {
         self.last = s;
     }
 
+    /// `n` lit samples from `steps`: the lines of a frame, most of it, so a
+    /// loop of a few operations a sample writing the deltas' pairs straight
+    /// into the room checked once a run.
+    #[inline]
+    fn lits<S: Steps>(&mut self, mem: &mut [u8], steps: &mut S, n: usize) {
+        let mut left = n;
+        while left > 0 && !self.full {
+            // The open delta run and its count, or a new one.
+            let open = match self.open {
+                Open::Deltas(at) => mem.get(at).filter(|&&h| h < MAX_DELTAS).map(|&h| (at, h)),
+                _ => None,
+            };
+            let (at, had) = match open {
+                Some(run) => run,
+                None => {
+                    let at = self.len;
+                    if !self.put(mem, [0]) {
+                        return;
+                    }
+                    self.open = Open::Deltas(at);
+                    (at, 0)
+                }
+            };
+            let room = mem.len().saturating_sub(self.len) / 2;
+            let k = left.min(usize::from(MAX_DELTAS - had)).min(room);
+            let Some(pairs) = mem.get_mut(self.len..self.len + 2 * k) else { return };
+            let (mut px, mut py) = (self.last.x, self.last.y);
+            let mut wrote = 0;
+            let mut far = None;
+            for pair in pairs.as_chunks_mut::<2>().0 {
+                let (x, y) = steps.step();
+                // Wrapping: the player adds the deltas wrapping too, so
+                // any pair within an i8 is exact.
+                let (dx, dy) = (x.wrapping_sub(px) as i16, y.wrapping_sub(py) as i16);
+                let (Ok(dx), Ok(dy)) = (i8::try_from(dx), i8::try_from(dy)) else {
+                    far = Some((x, y));
+                    break;
+                };
+                *pair = [dx as u8, dy as u8];
+                (px, py) = (x, y);
+                wrote += 1;
+            }
+            self.len += 2 * wrote;
+            self.last = Sample::new(px, py, Beam::On);
+            left -= wrote;
+            if let Some(h) = mem.get_mut(at) {
+                *h = had + wrote as u8; // wrote <= MAX_DELTAS - had
+            }
+            if wrote == 0 && had == 0 {
+                // The new run's count byte stays empty: take it back.
+                self.len = at;
+                self.open = Open::None;
+            }
+            match far {
+                // A step too far for a delta: a repeat run of one.
+                Some((x, y)) => {
+                    self.same(mem, Sample::new(x, y, Beam::On), 1);
+                    left -= 1;
+                }
+                None if k == room && left > 0 => self.full = true,
+                None => {}
+            }
+        }
+    }
+
     /// `n` samples equal to `s`: a short dwell of a lit beam as steps of
     /// no length, the rest as a repeat run.
     fn repeat(&mut self, mem: &mut [u8], s: Sample, n: usize) {
@@ -323,11 +388,7 @@ impl<R: RunSink> RunSink for Tee<'_, R> {
     }
 
     fn steps<S: Steps>(&mut self, steps: &mut S, n: usize) {
-        let mut copy = steps.clone();
-        for _ in 0..n {
-            let (x, y) = copy.step();
-            self.enc.lit(self.mem, x, y);
-        }
+        self.enc.lits(self.mem, &mut steps.clone(), n);
         self.sink.steps(steps, n);
     }
 }
