@@ -126,14 +126,16 @@ fn boot(engine: &mut Engine<'_>) {
 }
 
 /// Log the engine's events. Returns whether one of them makes the next
-/// `update` redraw the picture (a new volume, view or beam).
+/// `update` long: a new volume's commit (stitching and ordering). A new
+/// view or beam only fits the view there (the board counts the frame as
+/// it plays it), well within a half, so the beam plays on.
 fn log_events(engine: &mut Engine<'_>) -> bool {
-    let mut redraw = false;
+    let mut commit = false;
     while let Some(ev) = engine.next_event() {
         defmt::info!("engine t={}ms: {}", clock::now_ms(), ev);
-        redraw |= matches!(ev, Event::Committed { .. } | Event::ViewSet | Event::BeamSet);
+        commit |= matches!(ev, Event::Committed { .. });
     }
-    redraw
+    commit
 }
 
 /// Move the engine's answers into the transmit ring (as many as fit; the
@@ -306,8 +308,8 @@ fn run(board: board::Board, engine: &mut Engine<'static>) -> ! {
     defmt::info!("isoscope: showing the picture; listening on USART2");
     loop {
         // A frame boundary: what the link changed becomes the picture. A
-        // redraw takes long (see the README's budgets): the beam waits
-        // parked and blanked meanwhile.
+        // commit takes long (docs/board-refresh.md): the beam waits parked
+        // and blanked meanwhile.
         let hold = log_events(engine);
         if hold && out.hold().is_err() {
             board::fault();
