@@ -625,7 +625,10 @@ proptest! {
         }
         // One byte short: played whole all the same, and not kept.
         let need = replay.len();
-        prop_assume!(need > 0);
+        if need == 0 {
+            prop_assert!(want.is_empty());
+            return Ok(());
+        }
         let mut mem = vec![0u8; need - 1];
         let mut replay = Replay::new(&mut mem);
         let mut sch = Scheduler::new(cmds.iter().copied(), &cfg);

@@ -196,6 +196,7 @@ impl Recorder<'_, '_> {
         if core::mem::replace(&mut self.done, true) {
             return;
         }
+        self.enc.close(self.replay.mem);
         let key = self.key;
         self.replay.held =
             if self.enc.full { Held::TooLong { key } } else { Held::Frame { key, len: self.enc.len, stats } };
@@ -205,7 +206,7 @@ impl Recorder<'_, '_> {
 /// Where a recording stands.
 #[derive(Debug, Default, Clone, Copy)]
 struct Encoder {
-    /// Bytes written.
+    /// Bytes written (a delta run's count byte is written when it closes).
     len: usize,
     /// The run still open, which the next samples may extend.
     open: Open,
@@ -220,8 +221,8 @@ struct Encoder {
 enum Open {
     #[default]
     None,
-    /// A delta run whose count is at this byte.
-    Deltas(usize),
+    /// A delta run of `count` pairs whose count byte is at `at`.
+    Deltas { at: usize, count: u8 },
     /// A repeat run of the last sample that starts at this byte.
     Repeat(usize),
 }
@@ -231,9 +232,9 @@ impl Encoder {
     #[inline]
     fn put<const N: usize>(&mut self, mem: &mut [u8], bytes: [u8; N]) -> bool {
         let end = self.len.saturating_add(N);
-        match mem.get_mut(self.len..end) {
+        match mem.get_mut(self.len..end).and_then(|to| <&mut [u8; N]>::try_from(to).ok()) {
             Some(to) if !self.full => {
-                to.copy_from_slice(&bytes);
+                *to = bytes;
                 self.len = end;
                 true
             }
@@ -244,92 +245,62 @@ impl Encoder {
         }
     }
 
-    /// One lit sample at `(x, y)`.
-    #[inline]
+    /// Write the open delta run's count, if one is open: no delta run is
+    /// open after (an open repeat run stays open).
+    fn close(&mut self, mem: &mut [u8]) {
+        if let Open::Deltas { at, count } = self.open {
+            if let Some(h) = mem.get_mut(at) {
+                *h = count;
+            }
+            self.open = Open::None;
+        }
+    }
+
+    /// `n` lit samples from `steps`: the lines of a frame, most of it.
+    #[inline(always)]
+    fn lits<S: Steps>(&mut self, mem: &mut [u8], steps: &mut S, n: usize) {
+        for _ in 0..n {
+            let (x, y) = steps.step();
+            self.lit(mem, x, y);
+        }
+    }
+
+    /// One lit sample at `(x, y)`: a pair more in the open delta run (a
+    /// few operations), or [`Encoder::lit_slow`].
+    #[inline(always)]
     fn lit(&mut self, mem: &mut [u8], x: u16, y: u16) {
+        // Wrapping: the player adds the deltas wrapping too, so any pair
+        // within an i8 is exact.
+        let (dx, dy) = (x.wrapping_sub(self.last.x) as i16, y.wrapping_sub(self.last.y) as i16);
+        if let (Ok(dx), Ok(dy)) = (i8::try_from(dx), i8::try_from(dy))
+            && let Open::Deltas { count, .. } = &mut self.open
+            && *count < MAX_DELTAS
+            && let Some(pair) = mem.get_mut(self.len..).and_then(|m| m.first_chunk_mut::<2>())
+        {
+            *pair = [dx as u8, dy as u8];
+            *count += 1;
+            self.len += 2;
+            self.last = Sample::new(x, y, Beam::On);
+            return;
+        }
+        self.lit_slow(mem, x, y);
+    }
+
+    /// [`Encoder::lit`] opening a delta run, or as a repeat run of one if
+    /// the step is too far for a delta.
+    #[inline(never)]
+    fn lit_slow(&mut self, mem: &mut [u8], x: u16, y: u16) {
         let s = Sample::new(x, y, Beam::On);
-        let (dx, dy) = (i32::from(x) - i32::from(self.last.x), i32::from(y) - i32::from(self.last.y));
+        let (dx, dy) = (x.wrapping_sub(self.last.x) as i16, y.wrapping_sub(self.last.y) as i16);
         let (Ok(dx), Ok(dy)) = (i8::try_from(dx), i8::try_from(dy)) else {
             return self.same(mem, s, 1);
         };
-        let open = match self.open {
-            Open::Deltas(at) => mem.get_mut(at).filter(|h| **h < MAX_DELTAS),
-            _ => None,
-        };
-        match open {
-            Some(h) => *h += 1,
-            None => {
-                self.open = Open::Deltas(self.len);
-                self.put(mem, [1]);
-            }
+        self.close(mem);
+        let at = self.len;
+        if self.put(mem, [0, dx as u8, dy as u8]) {
+            self.open = Open::Deltas { at, count: 1 };
         }
-        self.put(mem, [dx as u8, dy as u8]);
         self.last = s;
-    }
-
-    /// `n` lit samples from `steps`: the lines of a frame, most of it, so a
-    /// loop of a few operations a sample writing the deltas' pairs straight
-    /// into the room checked once a run.
-    #[inline]
-    fn lits<S: Steps>(&mut self, mem: &mut [u8], steps: &mut S, n: usize) {
-        let mut left = n;
-        while left > 0 && !self.full {
-            // The open delta run and its count, or a new one.
-            let open = match self.open {
-                Open::Deltas(at) => mem.get(at).filter(|&&h| h < MAX_DELTAS).map(|&h| (at, h)),
-                _ => None,
-            };
-            let (at, had) = match open {
-                Some(run) => run,
-                None => {
-                    let at = self.len;
-                    if !self.put(mem, [0]) {
-                        return;
-                    }
-                    self.open = Open::Deltas(at);
-                    (at, 0)
-                }
-            };
-            let room = mem.len().saturating_sub(self.len) / 2;
-            let k = left.min(usize::from(MAX_DELTAS - had)).min(room);
-            let Some(pairs) = mem.get_mut(self.len..self.len + 2 * k) else { return };
-            let (mut px, mut py) = (self.last.x, self.last.y);
-            let mut wrote = 0;
-            let mut far = None;
-            for pair in pairs.as_chunks_mut::<2>().0 {
-                let (x, y) = steps.step();
-                // Wrapping: the player adds the deltas wrapping too, so
-                // any pair within an i8 is exact.
-                let (dx, dy) = (x.wrapping_sub(px) as i16, y.wrapping_sub(py) as i16);
-                let (Ok(dx), Ok(dy)) = (i8::try_from(dx), i8::try_from(dy)) else {
-                    far = Some((x, y));
-                    break;
-                };
-                *pair = [dx as u8, dy as u8];
-                (px, py) = (x, y);
-                wrote += 1;
-            }
-            self.len += 2 * wrote;
-            self.last = Sample::new(px, py, Beam::On);
-            left -= wrote;
-            if let Some(h) = mem.get_mut(at) {
-                *h = had + wrote as u8; // wrote <= MAX_DELTAS - had
-            }
-            if wrote == 0 && had == 0 {
-                // The new run's count byte stays empty: take it back.
-                self.len = at;
-                self.open = Open::None;
-            }
-            match far {
-                // A step too far for a delta: a repeat run of one.
-                Some((x, y)) => {
-                    self.same(mem, Sample::new(x, y, Beam::On), 1);
-                    left -= 1;
-                }
-                None if k == room && left > 0 => self.full = true,
-                None => {}
-            }
-        }
     }
 
     /// `n` samples equal to `s`: a short dwell of a lit beam as steps of
@@ -354,9 +325,10 @@ impl Encoder {
         {
             let had = usize::from(u16::from_le_bytes(*count));
             let k = left.min(MAX_REPEAT - had.min(MAX_REPEAT));
-            count.copy_from_slice(&((had + k) as u16).to_le_bytes()); // had + k <= u16::MAX
+            *count = ((had + k) as u16).to_le_bytes(); // had + k <= u16::MAX
             left -= k;
         }
+        self.close(mem);
         let [xl, xh] = s.x.to_le_bytes();
         let [yl, yh] = s.y.to_le_bytes();
         let beam = u8::from(s.beam == Beam::On);
