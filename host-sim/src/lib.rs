@@ -19,7 +19,7 @@
 //!   volume with a send window and retransmission, report the throughput.
 //! - [`device`]: the virtual board: the core's device engine behind a
 //!   pseudo-terminal or TCP port, at a real UART's line rate.
-//! - [`tty`]: raw serial ports and pseudo-terminals.
+//! - `tty` (Unix only): the virtual board's pseudo-terminal.
 //! - [`outfile`]: output files written whole or not at all.
 //! - [`relay`]: a noisy line between a sender and a board, for testing
 //!   links.
@@ -39,6 +39,7 @@ pub mod progress;
 pub mod relay;
 pub mod scene;
 pub mod svg;
+#[cfg(unix)]
 pub mod tty;
 pub mod virtual_dac;
 pub mod volume;

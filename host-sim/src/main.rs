@@ -160,7 +160,8 @@ struct SendArgs {
 
 #[derive(Args, Debug)]
 struct DeviceArgs {
-    /// Serve on a new pseudo-terminal; its path is the first line printed.
+    /// Serve on a new pseudo-terminal (Unix only); its path is the first
+    /// line printed.
     #[arg(long, conflicts_with = "tcp", required_unless_present = "tcp")]
     pty: bool,
     /// Serve on a TCP address instead (127.0.0.1:0 picks a free port); the
@@ -965,12 +966,17 @@ fn device(args: &DeviceArgs) -> Result<()> {
         opts.idle_timeout = Some(std::time::Duration::from_secs_f64(args.idle_timeout));
         return isoscope_sim::device::serve_tcp(&mut board, listener, &opts, &mut log);
     }
-    let pty = isoscope_sim::tty::open_pty()?;
-    writeln!(log, "{}", pty.path.display())?;
-    log.flush()?;
-    let mut master = &pty.master;
-    board.serve(&mut master, &opts, &mut log)?;
-    Ok(())
+    #[cfg(unix)]
+    {
+        let pty = isoscope_sim::tty::open_pty()?;
+        writeln!(log, "{}", pty.path.display())?;
+        log.flush()?;
+        let mut master = &pty.master;
+        board.serve(&mut master, &opts, &mut log)?;
+        Ok(())
+    }
+    #[cfg(not(unix))]
+    bail!("--pty needs a Unix system (pseudo-terminals); serve on TCP with --tcp 127.0.0.1:0")
 }
 
 fn relay(args: &RelayArgs) -> Result<()> {
