@@ -19,6 +19,7 @@
 //!   volume with a send window and retransmission, report the throughput.
 //! - [`device`]: the virtual board: the core's device engine behind a
 //!   pseudo-terminal or TCP port, at a real UART's line rate.
+//! - [`ports`]: the machine's serial ports, and which look like a board.
 //! - `tty` (Unix only): the virtual board's pseudo-terminal.
 //! - [`outfile`]: output files written whole or not at all.
 //! - [`relay`]: a noisy line between a sender and a board, for testing
@@ -35,6 +36,7 @@ pub mod info;
 pub mod link;
 pub mod outfile;
 pub mod phosphor;
+pub mod ports;
 pub mod progress;
 pub mod relay;
 pub mod scene;

@@ -76,6 +76,11 @@ enum Cmd {
     /// both ways at the rates given, from a seed; one line a client says
     /// what was done.
     Relay(RelayArgs),
+    /// List the serial ports, one a line: the name, USB vendor:product ids,
+    /// manufacturer and product when known, and which look like a board (an
+    /// ST-LINK's virtual COM port, an FTDI, CP210x, CH340 or Prolific
+    /// USB-UART).
+    Ports,
 }
 
 #[derive(Args, Debug)]
@@ -118,8 +123,9 @@ struct RelayArgs {
 struct SendArgs {
     #[command(flatten)]
     input: InputArgs,
-    /// The board's port: a serial device (/dev/ttyUSB0), the pseudo-terminal
-    /// `device --pty` printed, or tcp:HOST:PORT (`device --tcp`, QEMU).
+    /// The board's port: a serial device (/dev/ttyUSB0, COM3), the
+    /// pseudo-terminal `device --pty` printed, or tcp:HOST:PORT (`device
+    /// --tcp`, QEMU).
     #[arg(long)]
     port: String,
     /// Line rate in bit/s (8N1), 300 to 12,000,000.
@@ -1042,6 +1048,9 @@ fn main() -> ExitCode {
         Cmd::Send(a) => send(a),
         Cmd::Device(a) => device(a),
         Cmd::Relay(a) => relay(a),
+        Cmd::Ports => {
+            isoscope_sim::ports::available().and_then(|p| print_out(&isoscope_sim::ports::listing(&p)))
+        }
         Cmd::Info(a) => {
             load(&a.source).and_then(|(v, _)| print_out(&isoscope_sim::info::summarize(&v, a.bins).report()))
         }

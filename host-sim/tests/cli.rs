@@ -975,3 +975,25 @@ fn the_chosen_stride_is_named_in_plain_english() {
     assert!(err.contains("drawing every 3rd slice"), "{err}");
     assert!(!err.contains("3th"), "{err}");
 }
+
+/// `ports` lists the serial ports, a line each, or says plainly that there
+/// are none (as in most containers); it succeeds either way.
+#[test]
+fn ports_lists_the_serial_ports_or_says_there_are_none() {
+    let out = run(&["ports"]);
+    let stdout = text(&out.stdout);
+    assert!(out.status.success(), "ports failed with {}:\n{}", out.status, text(&out.stderr));
+    assert!(stdout.ends_with('\n'), "{stdout:?}");
+    if stdout != "no serial ports found\n" {
+        for line in stdout.lines() {
+            let mut words = line.split("  ");
+            assert!(words.next().is_some_and(|name| !name.is_empty()), "no port name in {line:?}");
+            assert!(
+                words.next().is_some_and(
+                    |how| how.starts_with("usb ") || ["pci", "bluetooth", "other"].contains(&how)
+                ),
+                "no attachment in {line:?}"
+            );
+        }
+    }
+}
