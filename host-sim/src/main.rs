@@ -79,7 +79,7 @@ enum Cmd {
     /// List the serial ports, one a line: the name, USB vendor:product ids,
     /// manufacturer and product when known, and which look like a board (an
     /// ST-LINK's virtual COM port, an FTDI, CP210x, CH340 or Prolific
-    /// USB-UART).
+    /// USB-UART): the one `send --port auto` picks.
     Ports,
 }
 
@@ -124,8 +124,9 @@ struct SendArgs {
     #[command(flatten)]
     input: InputArgs,
     /// The board's port: a serial device (/dev/ttyUSB0, COM3), the
-    /// pseudo-terminal `device --pty` printed, or tcp:HOST:PORT (`device
-    /// --tcp`, QEMU).
+    /// pseudo-terminal `device --pty` printed, tcp:HOST:PORT (`device
+    /// --tcp`, QEMU), or auto: the one serial port that looks like a board
+    /// (see `isoscope-sim ports`).
     #[arg(long)]
     port: String,
     /// Line rate in bit/s (8N1), 300 to 12,000,000.
@@ -921,7 +922,15 @@ fn send(args: &SendArgs) -> Result<()> {
     // The settings before the port: a bad one is refused here, not by the
     // board after the volume.
     cfg.check()?;
-    let (reader, writer) = open_port(&args.port, args.baud)?;
+    let port = if args.port == "auto" {
+        let ports = isoscope_sim::ports::available()?;
+        let chosen = isoscope_sim::ports::choose_auto(&ports)?;
+        eprintln!("isoscope-sim: --port auto: {}", chosen.line());
+        chosen.name.clone()
+    } else {
+        args.port.clone()
+    };
+    let (reader, writer) = open_port(&port, args.baud)?;
     let chunks_per_slice = wire.slice_bytes().div_ceil(cfg.chunk.max(1));
     let total = 2 + chunks_per_slice * usize::from(wire.dims[2]) + usize::from(view.is_some());
     let progress = Progress::new("sending frames", total);
@@ -932,7 +941,7 @@ fn send(args: &SendArgs) -> Result<()> {
         wire.dims[1],
         wire.dims[2],
         wire.sample_type,
-        args.port,
+        port,
         report.throughput() / 1e3,
         report.efficiency(args.baud) * 100.0
     );

@@ -1,11 +1,12 @@
-//! The machine's serial ports: list them and say which look like a board
-//! (an ST-LINK's virtual COM port, a common USB-UART adapter).
+//! The machine's serial ports: list them, say which look like a board
+//! (an ST-LINK's virtual COM port, a common USB-UART adapter), and pick
+//! the one board for `--port auto`.
 //!
-//! The listing is a pure function over [`PortInfo`] lists, so
+//! Listing and choosing are pure functions over [`PortInfo`] lists, so
 //! that they can be tested without hardware; [`available`] asks the
 //! system through the `serialport` crate.
 
-use anyhow::Result;
+use anyhow::{Result, bail};
 use std::fmt::Write as _;
 
 /// How a port is attached.
@@ -94,6 +95,38 @@ pub fn listing(ports: &[PortInfo]) -> String {
         return "no serial ports found\n".to_owned();
     }
     ports.iter().map(|p| p.line() + "\n").collect()
+}
+
+/// The port `--port auto` stands for: the one likely board among
+/// `ports`.
+///
+/// # Errors
+/// No likely board, or several: the message lists the candidates (the
+/// likely boards, or else every port found) and says to pass `--port
+/// NAME`.
+pub fn choose_auto(ports: &[PortInfo]) -> Result<&PortInfo> {
+    let boards: Vec<&PortInfo> = ports.iter().filter(|p| p.likely_board().is_some()).collect();
+    let names =
+        |list: &[&PortInfo]| list.iter().map(|p| format!("  {}", p.line())).collect::<Vec<_>>().join("\n");
+    match boards.as_slice() {
+        [one] => Ok(one),
+        [] if ports.is_empty() => {
+            bail!("--port auto: no serial ports found; connect the board, or pass --port NAME")
+        }
+        [] => {
+            let all: Vec<&PortInfo> = ports.iter().collect();
+            bail!(
+                "--port auto: none of the serial ports looks like a board (an ST-LINK or a USB-UART \
+                 adapter); the ports found:\n{}\npass --port NAME",
+                names(&all)
+            )
+        }
+        several => bail!(
+            "--port auto: {} serial ports look like a board:\n{}\npass --port NAME to pick one",
+            several.len(),
+            names(several)
+        ),
+    }
 }
 
 /// Sort ports by name, numbers within names by value (ttyS2 before
@@ -218,6 +251,51 @@ mod tests {
         assert_eq!(l.lines().count(), 2);
         assert!(l.starts_with("/dev/ttyS0  other\n/dev/ttyACM0  usb 0483:374b"), "{l}");
         assert!(l.ends_with('\n'));
+    }
+
+    #[test]
+    fn auto_picks_the_one_board() {
+        let ports = [
+            other("/dev/ttyS0", Attachment::Unknown),
+            stlink(),
+            usb("/dev/ttyACM1", 0x2341, 0x43, None, None),
+        ];
+        assert_eq!(choose_auto(&ports).unwrap().name, "/dev/ttyACM0");
+        let ftdi = [usb("COM7", 0x0403, 0x6001, Some("FTDI"), Some("FT232R USB UART"))];
+        assert_eq!(choose_auto(&ftdi).unwrap().name, "COM7");
+    }
+
+    #[test]
+    fn auto_refuses_no_port_plainly() {
+        let e = choose_auto(&[]).unwrap_err().to_string();
+        assert!(e.contains("no serial ports found") && e.contains("--port NAME"), "{e}");
+    }
+
+    #[test]
+    fn auto_refuses_ports_none_of_which_is_a_board_and_lists_them() {
+        let ports = [other("/dev/ttyS0", Attachment::Unknown), usb("/dev/ttyACM1", 0x2341, 0x43, None, None)];
+        let e = choose_auto(&ports).unwrap_err().to_string();
+        assert!(e.contains("none of the serial ports looks like a board"), "{e}");
+        assert!(e.contains("/dev/ttyS0") && e.contains("/dev/ttyACM1") && e.contains("--port NAME"), "{e}");
+    }
+
+    #[test]
+    fn auto_refuses_several_boards_and_lists_only_them() {
+        let ports = [
+            stlink(),
+            other("/dev/ttyS0", Attachment::Unknown),
+            usb(
+                "/dev/ttyUSB0",
+                0x10c4,
+                0xea60,
+                Some("Silicon Labs"),
+                Some("CP2102 USB to UART Bridge Controller"),
+            ),
+        ];
+        let e = choose_auto(&ports).unwrap_err().to_string();
+        assert!(e.contains("2 serial ports look like a board"), "{e}");
+        assert!(e.contains("/dev/ttyACM0") && e.contains("/dev/ttyUSB0") && !e.contains("/dev/ttyS0"), "{e}");
+        assert!(e.contains("--port NAME"), "{e}");
     }
 
     #[test]

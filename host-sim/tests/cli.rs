@@ -997,3 +997,20 @@ fn ports_lists_the_serial_ports_or_says_there_are_none() {
         }
     }
 }
+
+/// `send --port auto` without exactly one likely board says so plainly and
+/// asks for `--port NAME`, after a plain-English list of the candidates.
+#[test]
+fn send_to_port_auto_without_a_board_asks_for_a_port_name() {
+    let listed = text(&run(&["ports"]).stdout);
+    if listed.matches("likely board").count() == 1 {
+        eprintln!("a board is connected: not sending it a volume from a test");
+        return;
+    }
+    let out = run(&["send", "--demo", "sphere:8", "--port", "auto"]);
+    let err = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.starts_with("isoscope-sim: error: --port auto: "), "{err}");
+    assert!(err.contains("pass --port NAME"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
