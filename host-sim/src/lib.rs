@@ -19,7 +19,9 @@
 //!   volume with a send window and retransmission, report the throughput.
 //! - [`device`]: the virtual board: the core's device engine behind a
 //!   pseudo-terminal or TCP port, at a real UART's line rate.
-//! - [`tty`]: raw serial ports and pseudo-terminals.
+//! - [`ports`]: the machine's serial ports, which look like a board, and
+//!   the one `--port auto` picks.
+//! - `tty` (Unix only): the virtual board's pseudo-terminal.
 //! - [`outfile`]: output files written whole or not at all.
 //! - [`relay`]: a noisy line between a sender and a board, for testing
 //!   links.
@@ -35,10 +37,12 @@ pub mod info;
 pub mod link;
 pub mod outfile;
 pub mod phosphor;
+pub mod ports;
 pub mod progress;
 pub mod relay;
 pub mod scene;
 pub mod svg;
+#[cfg(unix)]
 pub mod tty;
 pub mod virtual_dac;
 pub mod volume;

@@ -76,6 +76,11 @@ enum Cmd {
     /// both ways at the rates given, from a seed; one line a client says
     /// what was done.
     Relay(RelayArgs),
+    /// List the serial ports, one a line: the name, USB vendor:product ids,
+    /// manufacturer and product when known, and which look like a board (an
+    /// ST-LINK's virtual COM port, an FTDI, CP210x, CH340 or Prolific
+    /// USB-UART): the one `send --port auto` picks.
+    Ports,
 }
 
 #[derive(Args, Debug)]
@@ -118,8 +123,10 @@ struct RelayArgs {
 struct SendArgs {
     #[command(flatten)]
     input: InputArgs,
-    /// The board's port: a serial device (/dev/ttyUSB0), the pseudo-terminal
-    /// `device --pty` printed, or tcp:HOST:PORT (`device --tcp`, QEMU).
+    /// The board's port: a serial device (/dev/ttyUSB0, COM3), the
+    /// pseudo-terminal `device --pty` printed, tcp:HOST:PORT (`device
+    /// --tcp`, QEMU), or auto: the one serial port that looks like a board
+    /// (see `isoscope-sim ports`).
     #[arg(long)]
     port: String,
     /// Line rate in bit/s (8N1), 300 to 12,000,000.
@@ -160,7 +167,8 @@ struct SendArgs {
 
 #[derive(Args, Debug)]
 struct DeviceArgs {
-    /// Serve on a new pseudo-terminal; its path is the first line printed.
+    /// Serve on a new pseudo-terminal (Unix only); its path is the first
+    /// line printed.
     #[arg(long, conflicts_with = "tcp", required_unless_present = "tcp")]
     pty: bool,
     /// Serve on a TCP address instead (127.0.0.1:0 picks a free port); the
@@ -914,7 +922,15 @@ fn send(args: &SendArgs) -> Result<()> {
     // The settings before the port: a bad one is refused here, not by the
     // board after the volume.
     cfg.check()?;
-    let (reader, writer) = open_port(&args.port, args.baud)?;
+    let port = if args.port == "auto" {
+        let ports = isoscope_sim::ports::available()?;
+        let chosen = isoscope_sim::ports::choose_auto(&ports)?;
+        eprintln!("isoscope-sim: --port auto: {}", chosen.line());
+        chosen.name.clone()
+    } else {
+        args.port.clone()
+    };
+    let (reader, writer) = open_port(&port, args.baud)?;
     let chunks_per_slice = wire.slice_bytes().div_ceil(cfg.chunk.max(1));
     let total = 2 + chunks_per_slice * usize::from(wire.dims[2]) + usize::from(view.is_some());
     let progress = Progress::new("sending frames", total);
@@ -925,7 +941,7 @@ fn send(args: &SendArgs) -> Result<()> {
         wire.dims[1],
         wire.dims[2],
         wire.sample_type,
-        args.port,
+        port,
         report.throughput() / 1e3,
         report.efficiency(args.baud) * 100.0
     );
@@ -965,12 +981,17 @@ fn device(args: &DeviceArgs) -> Result<()> {
         opts.idle_timeout = Some(std::time::Duration::from_secs_f64(args.idle_timeout));
         return isoscope_sim::device::serve_tcp(&mut board, listener, &opts, &mut log);
     }
-    let pty = isoscope_sim::tty::open_pty()?;
-    writeln!(log, "{}", pty.path.display())?;
-    log.flush()?;
-    let mut master = &pty.master;
-    board.serve(&mut master, &opts, &mut log)?;
-    Ok(())
+    #[cfg(unix)]
+    {
+        let pty = isoscope_sim::tty::open_pty()?;
+        writeln!(log, "{}", pty.path.display())?;
+        log.flush()?;
+        let mut master = &pty.master;
+        board.serve(&mut master, &opts, &mut log)?;
+        Ok(())
+    }
+    #[cfg(not(unix))]
+    bail!("--pty needs a Unix system (pseudo-terminals); serve on TCP with --tcp 127.0.0.1:0")
 }
 
 fn relay(args: &RelayArgs) -> Result<()> {
@@ -1036,6 +1057,9 @@ fn main() -> ExitCode {
         Cmd::Send(a) => send(a),
         Cmd::Device(a) => device(a),
         Cmd::Relay(a) => relay(a),
+        Cmd::Ports => {
+            isoscope_sim::ports::available().and_then(|p| print_out(&isoscope_sim::ports::listing(&p)))
+        }
         Cmd::Info(a) => {
             load(&a.source).and_then(|(v, _)| print_out(&isoscope_sim::info::summarize(&v, a.bins).report()))
         }

@@ -1,5 +1,6 @@
-//! Serial ports and pseudo-terminals: raw mode, baud rate, and a pty pair
-//! for the virtual board.
+//! The virtual board's pseudo-terminal (Unix only): a pty pair in raw
+//! mode. Real serial ports are opened with the `serialport` crate
+//! ([`crate::link::open_port`]).
 
 use anyhow::{Context, Result, bail};
 use nix::sys::termios::{self, BaudRate, SetArg, SpecialCharacterIndices};

@@ -252,6 +252,7 @@ fn raw_dev_zero_stops_at_the_dims() {
 }
 
 #[test]
+#[cfg(unix)]
 fn a_nifti_pair_whose_image_is_dev_zero_stops_at_the_header() {
     let s = Scratch::new("nifti-zero");
     let hdr = s.file("zero.hdr", &nifti(&[4, 4, 4], 2, 8, b"ni1\0"));

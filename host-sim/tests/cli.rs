@@ -975,3 +975,42 @@ fn the_chosen_stride_is_named_in_plain_english() {
     assert!(err.contains("drawing every 3rd slice"), "{err}");
     assert!(!err.contains("3th"), "{err}");
 }
+
+/// `ports` lists the serial ports, a line each, or says plainly that there
+/// are none (as in most containers); it succeeds either way.
+#[test]
+fn ports_lists_the_serial_ports_or_says_there_are_none() {
+    let out = run(&["ports"]);
+    let stdout = text(&out.stdout);
+    assert!(out.status.success(), "ports failed with {}:\n{}", out.status, text(&out.stderr));
+    assert!(stdout.ends_with('\n'), "{stdout:?}");
+    if stdout != "no serial ports found\n" {
+        for line in stdout.lines() {
+            let mut words = line.split("  ");
+            assert!(words.next().is_some_and(|name| !name.is_empty()), "no port name in {line:?}");
+            assert!(
+                words.next().is_some_and(
+                    |how| how.starts_with("usb ") || ["pci", "bluetooth", "other"].contains(&how)
+                ),
+                "no attachment in {line:?}"
+            );
+        }
+    }
+}
+
+/// `send --port auto` without exactly one likely board says so plainly and
+/// asks for `--port NAME`, after a plain-English list of the candidates.
+#[test]
+fn send_to_port_auto_without_a_board_asks_for_a_port_name() {
+    let listed = text(&run(&["ports"]).stdout);
+    if listed.matches("likely board").count() == 1 {
+        eprintln!("a board is connected: not sending it a volume from a test");
+        return;
+    }
+    let out = run(&["send", "--demo", "sphere:8", "--port", "auto"]);
+    let err = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.starts_with("isoscope-sim: error: --port auto: "), "{err}");
+    assert!(err.contains("pass --port NAME"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
