@@ -524,6 +524,13 @@ where
     let mut sent_epoch = vec![0u32; n];
     let mut ever_sent = vec![false; n];
     let (mut base, mut next, mut epoch) = (0usize, 0usize, 0u32);
+    // The board answers frames in the order it receives them, so answers
+    // come in increasing frame order until a go-back's frames reach it.
+    // After a go-back, the answers still due for the frames in flight
+    // before it (OutOfOrder, after the loss that caused the go-back) are
+    // not new losses: an answer for a frame no later than the last one
+    // answered shows the resent frames have arrived (`settled`).
+    let (mut last_idx, mut settled) = (None::<usize>, true);
     let mut timeouts_in_row = 0;
     let mut end_sent_at = None;
     let t0 = Instant::now();
@@ -548,6 +555,8 @@ where
                 let rel = usize::from(s.wrapping_sub(seq(base)));
                 if rel < window && base + rel < n {
                     acked[base + rel] = true;
+                    settled |= last_idx.is_some_and(|l| base + rel <= l);
+                    last_idx = Some(base + rel);
                 }
                 while base < n && acked[base] {
                     base += 1;
@@ -566,6 +575,10 @@ where
                 }
                 let rel = usize::from(s.wrapping_sub(seq(base)));
                 let idx = (rel < window && base + rel < n).then_some(base + rel);
+                if let Some(i) = idx {
+                    settled |= last_idx.is_some_and(|l| i <= l);
+                    last_idx = Some(i);
+                }
                 match code {
                     // It has it already (a retransmission crossed an ack).
                     NackCode::Duplicate => {
@@ -587,10 +600,12 @@ where
                     | NackCode::UnknownMessage
                     | NackCode::Oversize
                     | NackCode::Busy => {
-                        let stale = idx.is_some_and(|i| sent_epoch[i] != epoch);
+                        let stale = idx.is_some_and(|i| sent_epoch[i] != epoch)
+                            || (code == NackCode::OutOfOrder && !settled);
                         if !stale && next > base {
                             epoch += 1;
                             next = base;
+                            settled = false;
                             stalls += 1;
                             if stalls > MAX_STALLS {
                                 bail!(
@@ -638,6 +653,8 @@ where
                 }
                 epoch += 1;
                 next = base;
+                // Whatever was in flight is lost or answered by now.
+                settled = true;
                 win = (win / 2).max(1);
             }
             Err(RecvTimeoutError::Disconnected) => bail!("the port closed"),

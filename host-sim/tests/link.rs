@@ -434,3 +434,34 @@ fn losing_any_one_frame_of_a_transfer_is_recovered() {
         assert_eq!(segments(g.commands(), g.shift()), want, "frame {drop} lost");
     }
 }
+
+/// A board that replays its picture from the slice memory answers the next
+/// volume's first command Busy (the memory comes back at its next frame
+/// boundary); the answers still due for the frames sent behind it
+/// (OutOfOrder) are not new losses: the window goes back once, not once a
+/// frame (which sent the whole volume again, 64 frames for torus 16^3).
+#[test]
+fn a_busy_first_command_costs_one_go_back() {
+    let (vol, _) = demo(12);
+    let mem: &'static mut HostBuffers =
+        Box::leak(Box::new(HostBuffers::new(&host_capacity(12 * 12 * 4, 16, 20_000))));
+    let engine = Arc::new(Mutex::new(Engine::new(EngineConfig::default(), mem.buffers()).unwrap()));
+    engine.lock().unwrap().replay_frames(true);
+    let wire = WireVolume::from_loaded(&vol).unwrap();
+    let cfg = SendConfig { levels: vec![0.1], chunk: 128, window: 8, ..SendConfig::default() };
+    let mut reports = Vec::new();
+    for _ in 0..2 {
+        let (tx, rx) = channel();
+        let line =
+            Line { engine: engine.clone(), answers: tx, rng: 1, corrupt: u64::MAX, lose: u64::MAX, bytes: 0 };
+        reports.push(send_volume(Answers(rx, Vec::new()), line, &wire, &cfg, None).unwrap());
+    }
+    let [first, second] = &reports[..] else { unreachable!() };
+    assert_eq!((first.retransmitted, first.nacks.len()), (0, 0), "{first:?}");
+    assert!(
+        second.nacks.iter().any(|&(c, k)| c == isoscope_core::wire::NackCode::Busy && k == 1),
+        "{second:?}"
+    );
+    assert!(second.frames > 3 * 8, "{second:?}");
+    assert!(second.retransmitted <= 8, "one window sent again: {second:?}");
+}
