@@ -57,7 +57,7 @@ static mut RX: Queue<u8, { RX_QUEUE + 1 }> = Queue::new();
 static mut TX: Queue<u8, { TX_QUEUE + 1 }> = Queue::new();
 /// The interrupt's ends of the rings: it fills the receive ring and
 /// empties the transmit ring.
-type IsrEnds = (Producer<'static, u8>, Consumer<'static, u8>);
+type IsrEnds = (Producer<'static, u8, { RX_QUEUE + 1 }>, Consumer<'static, u8, { TX_QUEUE + 1 }>);
 /// The interrupt's ends, handed over once by [`init`].
 static ISR_ENDS: Mutex<RefCell<Option<IsrEnds>>> = Mutex::new(RefCell::new(None));
 
@@ -78,12 +78,12 @@ pub struct Stats {
 
 /// The main loop's end of the receive ring.
 pub struct Rx {
-    rx: Consumer<'static, u8>,
+    rx: Consumer<'static, u8, { RX_QUEUE + 1 }>,
 }
 
 /// The main loop's end of the transmit ring.
 pub struct Tx {
-    tx: Producer<'static, u8>,
+    tx: Producer<'static, u8, { TX_QUEUE + 1 }>,
 }
 
 fn usart2() -> &'static pac::usart1::RegisterBlock {
@@ -163,7 +163,7 @@ impl Tx {
     /// the ring and disables itself when it is empty. (Under QEMU, which
     /// raises no TXE interrupt, the interrupt handler is called from here.)
     pub fn pump(&mut self) {
-        if self.tx.is_empty() {
+        if self.tx.len() == 0 {
             return;
         }
         cortex_m::interrupt::free(|_| {

@@ -1,7 +1,7 @@
 //! `isoscope-sim`: the isoscope core on the host.
 
 use anyhow::{Context, Result, bail};
-use clap::{Args, Parser, Subcommand, ValueEnum};
+use clap::{Args, CommandFactory, Parser, Subcommand, ValueEnum};
 use isoscope_core::beam::BeamConfig;
 use isoscope_core::contour::Voxel;
 use isoscope_core::contour::grid::{Plane, Volume};
@@ -81,6 +81,27 @@ enum Cmd {
     /// ST-LINK's virtual COM port, an FTDI, CP210x, CH340 or Prolific
     /// USB-UART): the one `send --port auto` picks.
     Ports,
+    /// Print a completion script for SHELL to standard output, e.g.
+    /// `isoscope-sim completions bash > ~/.local/share/bash-completion/completions/isoscope-sim`.
+    Completions(CompletionsArgs),
+    /// Write the manual page (roff) to standard output or to -o FILE, e.g.
+    /// `isoscope-sim manpage -o isoscope-sim.1; man ./isoscope-sim.1`.
+    #[command(visible_alias = "man")]
+    Manpage(ManpageArgs),
+}
+
+#[derive(Args, Debug)]
+struct CompletionsArgs {
+    /// The shell to write completions for.
+    #[arg(value_enum)]
+    shell: clap_complete::Shell,
+}
+
+#[derive(Args, Debug)]
+struct ManpageArgs {
+    /// Output file (default: standard output).
+    #[arg(short, long)]
+    output: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -1025,6 +1046,73 @@ fn parse_probability(s: &str) -> Result<f64, String> {
     Ok(p)
 }
 
+/// A completion script for `args.shell`, generated from the same clap
+/// declarations that parse the command line, so it cannot drift from them.
+fn completions(args: &CompletionsArgs) -> Result<()> {
+    let mut script = Vec::new();
+    clap_complete::generate(args.shell, &mut Cli::command(), "isoscope-sim", &mut script);
+    print_out(&String::from_utf8(script).context("the completion script is not UTF-8")?)
+}
+
+/// The manual page, in roff: one page for the whole tool, so that
+/// `man isoscope-sim` shows every subcommand's synopsis, description and
+/// options (not a list of pages that do not exist), then the examples.
+fn manpage(args: &ManpageArgs) -> Result<()> {
+    let page = manual_page().context("cannot render the manual page")?;
+    match &args.output {
+        Some(path) => write_whole(path, |w| {
+            w.write_all(page.as_bytes()).with_context(|| format!("cannot write {}", path.display()))
+        }),
+        None => print_out(&page),
+    }
+}
+
+/// The page, from the clap declarations that parse the command line.
+/// `clap_mangen` renders a section at a time; each rendering starts with the
+/// same two lines of set-up for apostrophes, kept once at the top.
+fn manual_page() -> Result<String> {
+    type Render = fn(&clap_mangen::Man, &mut dyn Write) -> std::io::Result<()>;
+    fn part(man: &clap_mangen::Man, render: Render, heading: Option<&str>) -> Result<String> {
+        let mut buf = Vec::new();
+        render(man, &mut buf)?;
+        let text = String::from_utf8(buf).context("the manual page is not UTF-8")?;
+        let mut body: String = text
+            .lines()
+            .filter(|l| !l.starts_with(".ie \\n(.g .ds Aq") && !l.starts_with(".el .ds Aq"))
+            .map(|l| format!("{l}\n"))
+            .collect();
+        if let Some(heading) = heading {
+            body = body.strip_prefix(heading).map(str::to_owned).unwrap_or(body);
+        }
+        Ok(body)
+    }
+    use clap_mangen::Man;
+    let mut cmd = Cli::command();
+    cmd.build();
+    let man = Man::new(cmd.clone());
+    let mut title = Vec::new();
+    man.render_title(&mut title)?;
+    let mut page = String::from_utf8(title).context("the manual page is not UTF-8")?;
+    for render in [Man::render_name_section, Man::render_synopsis_section, Man::render_description_section] {
+        page += &part(&man, render, None)?;
+    }
+    page += ".SH COMMANDS\n";
+    for sub in cmd.get_subcommands().filter(|s| s.get_name() != "help") {
+        let sub_man = Man::new(sub.clone());
+        page += &format!(".SS \"isoscope\\-sim {}\"\n", sub.get_name());
+        page += &part(&sub_man, Man::render_synopsis_section, Some(".SH SYNOPSIS\n"))?;
+        page += ".PP\n";
+        page += &part(&sub_man, Man::render_description_section, Some(".SH DESCRIPTION\n"))?;
+        page += &part(&sub_man, Man::render_options_section, Some(".SH OPTIONS\n"))?;
+    }
+    // The examples and the volume syntax as laid out in --help: no filling.
+    page += ".SH NOTES\n.nf\n";
+    page += &part(&man, Man::render_extra_section, Some(".SH EXTRA\n"))?;
+    page += ".fi\n";
+    page += &part(&man, Man::render_version_section, None)?;
+    Ok(page)
+}
+
 fn stats(args: &StatsArgs) -> Result<()> {
     let scene = build_scene(args, false)?;
     print_out(&scene.report())?;
@@ -1060,6 +1148,8 @@ fn main() -> ExitCode {
         Cmd::Ports => {
             isoscope_sim::ports::available().and_then(|p| print_out(&isoscope_sim::ports::listing(&p)))
         }
+        Cmd::Completions(a) => completions(a),
+        Cmd::Manpage(a) => manpage(a),
         Cmd::Info(a) => {
             load(&a.source).and_then(|(v, _)| print_out(&isoscope_sim::info::summarize(&v, a.bins).report()))
         }

@@ -1014,3 +1014,77 @@ fn send_to_port_auto_without_a_board_asks_for_a_port_name() {
     assert!(err.contains("pass --port NAME"), "{err}");
     assert!(!err.contains("panicked"), "{err}");
 }
+
+// --- Packaging: shell completions and the manual page ----------------------
+
+#[test]
+fn completions_for_every_shell_name_the_subcommands() {
+    for shell in ["bash", "zsh", "fish", "powershell", "elvish"] {
+        let out = run(&["completions", shell]);
+        let (script, err) = (text(&out.stdout), text(&out.stderr));
+        assert!(out.status.success(), "completions {shell} failed with {}:\n{err}", out.status);
+        assert!(err.is_empty(), "completions {shell} said: {err}");
+        assert!(script.contains("isoscope-sim"), "completions {shell}:\n{script}");
+        for sub in ["render", "contour", "completions", "manpage"] {
+            assert!(script.contains(sub), "completions {shell} do not mention `{sub}`:\n{script}");
+        }
+    }
+    // The bash script is at least valid bash (where bash is at hand).
+    let script = run(&["completions", "bash"]).stdout;
+    if let Ok(mut bash) = Command::new("bash")
+        .arg("-n")
+        .stdin(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+    {
+        use std::io::Write;
+        bash.stdin.take().unwrap().write_all(&script).unwrap();
+        let out = bash.wait_with_output().unwrap();
+        assert!(out.status.success(), "bash -n: {}", text(&out.stderr));
+    }
+}
+
+#[test]
+fn completions_for_an_unknown_shell_is_a_plain_usage_error() {
+    for args in [&["completions", "tcsh"][..], &["completions"][..]] {
+        let out = run(args);
+        let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
+        assert_eq!(out.status.code(), Some(2), "isoscope-sim {args:?}: {}\n{stderr}", out.status);
+        assert!(stdout.is_empty(), "isoscope-sim {args:?} wrote:\n{stdout}");
+        assert!(stderr.starts_with("isoscope-sim: error: "), "isoscope-sim {args:?}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
+    let err = text(&run(&["completions", "tcsh"]).stderr);
+    assert!(err.contains("invalid value 'tcsh'"), "{err}");
+    for shell in ["bash", "elvish", "fish", "powershell", "zsh"] {
+        assert!(err.contains(shell), "the possible values are not listed: {err}");
+    }
+}
+
+#[test]
+fn the_manual_page_is_one_roff_page_with_every_subcommand() {
+    let out = run(&["manpage"]);
+    let page = text(&out.stdout);
+    assert!(out.status.success(), "manpage failed with {}:\n{}", out.status, text(&out.stderr));
+    assert!(page.contains(".TH isoscope-sim 1"), "{page}");
+    for sub in
+        ["contour", "stats", "info", "wav", "render", "send", "device", "relay", "completions", "manpage"]
+    {
+        assert!(page.contains(&format!(".SS \"isoscope\\-sim {sub}\"\n")), "no section for `{sub}`:\n{page}");
+    }
+    // A subcommand's options are on the page, not only its name.
+    assert!(page.contains("\\-\\-level"), "{page}");
+    // The set-up for apostrophes once, at the top; no page that does not
+    // exist is referred to.
+    assert!(page.starts_with(".ie \\n(.g .ds Aq"), "{page}");
+    assert_eq!(page.matches(".ds Aq").count(), 2, "{page}");
+    assert!(!page.contains("isoscope\\-sim\\-render(1)"), "{page}");
+
+    // `man -o FILE` (the alias) writes the same page, and nothing to stdout.
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("isoscope-sim.1");
+    let out = run(&["man", "-o", &path_str(&file)]);
+    assert!(out.status.success(), "man -o failed: {}", text(&out.stderr));
+    assert!(out.stdout.is_empty(), "{}", text(&out.stdout));
+    assert_eq!(std::fs::read_to_string(&file).unwrap(), page);
+}
