@@ -601,8 +601,8 @@ mod dma {
         MIN_SAMPLE_RATE_HZ, Out, SAMPLE_RATE_HZ, XY, pac, write_slots,
     };
     use core::sync::atomic::{AtomicU8, AtomicU32, Ordering};
-    use isoscope_core::output::{Beam, SampleSource, Samples};
     use isoscope_core::beam::pace::{self, PaceConfig, Pacer};
+    use isoscope_core::output::{Beam, SampleSource, Samples};
     use stm32f4xx_hal::interrupt;
 
     /// Halves the DMA has finished with (bit 0: first, bit 1: second), set
@@ -651,10 +651,21 @@ mod dma {
             // register: the park sample.
             self.park();
             let ticks = |hz: u32| (self.timer_hz / hz).max(1);
-            let pace = PaceConfig { half: HALF as u32, fastest: ticks(SAMPLE_RATE_HZ), slowest: ticks(MIN_SAMPLE_RATE_HZ) };
+            let pace = PaceConfig {
+                half: HALF as u32,
+                fastest: ticks(SAMPLE_RATE_HZ),
+                slowest: ticks(MIN_SAMPLE_RATE_HZ),
+            };
             let Ok(pacer) = Pacer::new(pace) else { super::fault() };
-            let mut st =
-                Streaming { out: self, last_beam: Beam::Off, open: None, planned: 0, forgiven: 0, pacer, unmeasured: 0 };
+            let mut st = Streaming {
+                out: self,
+                last_beam: Beam::Off,
+                open: None,
+                planned: 0,
+                forgiven: 0,
+                pacer,
+                unmeasured: 0,
+            };
             for half in 0..2 {
                 let park = st.out.park;
                 st.write(half, 0, &mut Samples(core::iter::repeat(park)));

@@ -37,9 +37,9 @@
 //! sample; BSRR writes before the first DHR12RD (setting up the pin) must
 //! leave the beam blanked.
 
-use isoscope_core::output::{Beam, Sample};
 use isoscope_core::demo::Demo;
 use isoscope_core::engine::{Engine, Event, StaticBuffers};
+use isoscope_core::output::{Beam, Sample};
 use isoscope_core::wire::{
     AXIS_X, AXIS_Y, AXIS_Z, FrameDecoder, Levels, MAX_CHUNK, MAX_FRAME_LEN, Message, PROTOCOL_VERSION,
     SampleType, encode,
