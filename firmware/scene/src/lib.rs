@@ -63,9 +63,12 @@ pub const SAMPLE_RATE_HZ: u32 = BOARD.sample_rate_hz;
 
 /// The slowest sample rate the board's pacer ([`isoscope_core::beam::pace`])
 /// may choose for a picture whose refill cannot keep up with
-/// [`SAMPLE_RATE_HZ`]: a half buffer then lasts 2 ms, more than the
-/// densest picture's refill takes.
-pub const MIN_SAMPLE_RATE_HZ: u32 = 250_000;
+/// [`SAMPLE_RATE_HZ`]: a half buffer then lasts 3.2 ms (537,600 cycles).
+/// The costliest refill measured is the first frame of gyroid 32^3,
+/// scheduled and recorded for replay (`scripts/firmware-bench`: 413,501
+/// est. cycles in its worst half, 77% of that); at 250 kS/s (2 ms) it was
+/// late, and the DMA would have played a stale half.
+pub const MIN_SAMPLE_RATE_HZ: u32 = 160_000;
 
 /// The firmware's version, reported in `Hello`.
 pub const FIRMWARE_VERSION: [u8; 3] = [0, 1, 0];
