@@ -298,9 +298,11 @@ impl<'a> Stream<'a> {
         self.slots.len() < self.capacity
     }
 
-    /// The lent slice memory back (what [`Stream::lend`] gave).
+    /// The lent slice memory back (what [`Stream::lend`] gave: the whole
+    /// of it, which `capacity` counts).
     pub(crate) fn give_back(&mut self, slots: &'a mut [u8]) {
-        if self.lent() && slots.len() == self.capacity {
+        if self.lent() {
+            self.capacity = slots.len();
             self.slots = slots;
         }
     }
