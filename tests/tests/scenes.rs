@@ -5,7 +5,7 @@
 //! beam, 1 MS/s, on the STM32F407's capacities (`--board f407`) and with the
 //! host's room for the whole surface.
 //!
-//! Figures measured when written (README, "Display pipeline"); each bound
+//! Figures measured when written (docs/design.md, "Display pipeline"); each bound
 //! leaves 2% of slack so that an ordering change which makes a scene worse
 //! fails here. Issue 15's targets (blank travel at most 3.0%, 2% and 5% of
 //! lit length) hold for hydrogen 32^3 on the f407 and for the gyroid 48^3
