@@ -1,7 +1,7 @@
 //! Contouring speed. `cargo bench -p isoscope-core --bench contour`
 //!
 //! - `surface/*`: all 3 x 256 axis slices of a 256^3 f32 gyroid at level 0,
-//!   single thread (the README's Mcells/s figure), and the same volume at a
+//!   single thread (docs/performance.md's Mcells/s figure), and the same volume at a
 //!   level no cell meets (the cost of the skip test alone).
 //! - `cells/*`: the crossing cells of one x-y slice: building their trees
 //!   (subgrid, direction code, template lookup) versus traversing them

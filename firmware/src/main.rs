@@ -50,7 +50,7 @@ use defmt_semihosting as _;
 /// Watchdog timeout (LSI tolerance can shorten it to about 0.7 of this).
 /// The main loop feeds it every half buffer (512 us), but the longest
 /// stretches without feeding are the boot picture, contouring a slice and
-/// stitching and ordering a new surface (see the README's budgets).
+/// stitching and ordering a new surface (see docs/board-refresh.md).
 const WATCHDOG_MS: u32 = 3_000;
 /// Received bytes fed to the engine between two half-buffer refills (at
 /// 921,600 baud about 47 arrive in the 512 us of a half).

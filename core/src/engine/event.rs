@@ -139,7 +139,7 @@ impl core::fmt::Display for Event {
             Self::BeamSet => f.write_str("beam set"),
             Self::Redrawn { polylines, points, blank_permille, refresh_centi_hz } => write!(
                 f,
-                // Blanked travel over lit length (the README's measure): a
+                // Blanked travel over lit length (docs/scenes.md's measure): a
                 // ratio, past 100% when the jumps outrun the lines (a few
                 // dots far apart), so not written as a share.
                 "redrawn polylines={polylines} points={points} blank/lit={}.{}% refresh_hz={}.{:02}",
