@@ -381,6 +381,28 @@ fn garbage_config() -> impl Strategy<Value = BeamConfig> {
         })
 }
 
+/// The scheduler's frame of `cmds` recorded (as picture 9) into `mem` as it
+/// plays in runs, `chunks` samples at a time: the samples played, the
+/// frame's statistics, and the replay.
+fn record<'m>(
+    cmds: &[Command<ScreenPoint>],
+    cfg: &BeamConfig,
+    chunks: &[usize],
+    mem: &'m mut [u8],
+) -> (Vec<Sample>, FrameStats, Replay<'m>) {
+    let mut replay = Replay::new(mem);
+    let mut sch = Scheduler::new(cmds.iter().copied(), cfg);
+    let mut rec = replay.record(9).expect("memory");
+    let mut got = Vec::new();
+    for &n in chunks.iter().cycle() {
+        if rec.fill_runs(&mut sch, n, &mut Expand(&mut got)) < n {
+            break;
+        }
+    }
+    rec.finish(sch.stats());
+    (got, sch.stats(), replay)
+}
+
 /// A [`RunSink`] writing each run out as samples; a run of steps is lit.
 struct Expand<'a>(&'a mut Vec<Sample>);
 
@@ -600,21 +622,11 @@ proptest! {
         prop_assume!(bound <= 200_000);
         let want: Vec<Sample> = Scheduler::new(cmds.iter().copied(), &cfg).collect();
         let mut mem = vec![0u8; 8 * want.len() + 8];
-        let mut replay = Replay::new(&mut mem);
-        let mut sch = Scheduler::new(cmds.iter().copied(), &cfg);
-        let mut rec = replay.record(9).expect("memory");
-        let mut got = Vec::new();
-        for &n in chunks.iter().cycle() {
-            let k = rec.fill_runs(&mut sch, n, &mut Expand(&mut got));
-            if k < n {
-                break;
-            }
-        }
-        rec.finish(sch.stats());
+        let (got, stats, replay) = record(&cmds, &cfg, &chunks, &mut mem);
         prop_assert_eq!(&got, &want);
         for _ in 0..2 {
             let mut player = replay.play(9).expect("kept");
-            prop_assert_eq!(player.stats(), sch.stats());
+            prop_assert_eq!(player.stats(), stats);
             let mut again = Vec::new();
             for &n in chunks.iter().rev().cycle() {
                 if player.fill_runs(n, &mut Expand(&mut again)) < n {
@@ -630,18 +642,10 @@ proptest! {
             return Ok(());
         }
         let mut mem = vec![0u8; need - 1];
-        let mut replay = Replay::new(&mut mem);
-        let mut sch = Scheduler::new(cmds.iter().copied(), &cfg);
-        let mut rec = replay.record(9).expect("memory");
-        let mut got = Vec::new();
-        for &n in chunks.iter().cycle() {
-            if rec.fill_runs(&mut sch, n, &mut Expand(&mut got)) < n {
-                break;
-            }
-        }
-        rec.finish(sch.stats());
+        let (got, _, replay) = record(&cmds, &cfg, &chunks, &mut mem);
         prop_assert_eq!(&got, &want);
         prop_assert!(replay.play(9).is_none());
+        prop_assert!(replay.too_long(9));
         prop_assert!(replay.too_long(9));
     }
 

@@ -562,9 +562,7 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Iterator for Scheduler<I> {
 
     /// One sample: [`Scheduler::fill_with`] for one.
     fn next(&mut self) -> Option<Sample> {
-        let mut out = None;
-        self.fill_with(1, |s| out = Some(s));
-        out
+        self.next_sample()
     }
 
     fn size_hint(&self) -> (usize, Option<usize>) {

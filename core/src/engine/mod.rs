@@ -205,7 +205,7 @@ impl<'a> Engine<'a> {
     pub fn update(&mut self, now_ms: u32) -> bool {
         self.dev.check_timeout(now_ms);
         if self.dev.reclaim || self.dev.commit {
-            self.reclaim(now_ms);
+            self.take_back(self.dev.reclaim.then_some(now_ms));
         }
         let mut changed = false;
         if self.dev.commit {
@@ -242,18 +242,18 @@ impl<'a> Engine<'a> {
     pub fn replay_frames(&mut self, on: bool) {
         self.dev.replay_frames = on;
         if !on {
-            self.dev.reclaim = true;
-            self.reclaim(0);
-            self.dev.reclaimed_ms = None;
+            self.take_back(None);
         }
     }
 
-    /// The slice memory back from the replay, for a volume or a commit.
-    fn reclaim(&mut self, now_ms: u32) {
+    /// The slice memory back from the replay, if lent: for a commit, for
+    /// replay turned off, or for a volume that asked for it at `asked_ms`
+    /// (which then has [`RELEND_MS`] to begin before it is lent again).
+    fn take_back(&mut self, asked_ms: Option<u32>) {
         let dev = &mut self.dev;
         if dev.stream.lent() {
             dev.stream.give_back(self.replay.take());
-            dev.reclaimed_ms = dev.reclaim.then_some(now_ms);
+            dev.reclaimed_ms = asked_ms;
         }
         dev.reclaim = false;
     }

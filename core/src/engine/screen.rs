@@ -108,9 +108,7 @@ impl Iterator for Frame<'_, '_> {
     type Item = Sample;
 
     fn next(&mut self) -> Option<Sample> {
-        let mut out = None;
-        self.fill_with(1, |s| out = Some(s));
-        out
+        self.next_sample()
     }
 }
 

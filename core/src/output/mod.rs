@@ -61,6 +61,14 @@ pub trait SampleSource {
     fn fill_runs<R: RunSink>(&mut self, max: usize, sink: &mut R) -> usize {
         self.fill_with(max, |s| sink.repeat(s, 1))
     }
+
+    /// The next sample, if any: [`SampleSource::fill_with`] for one (what
+    /// a source's `Iterator::next` is).
+    fn next_sample(&mut self) -> Option<Sample> {
+        let mut out = None;
+        self.fill_with(1, |s| out = Some(s));
+        out
+    }
 }
 
 /// Where [`SampleSource::fill_runs`] hands samples, a run at a time, so
