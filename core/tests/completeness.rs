@@ -196,6 +196,26 @@ fn corrected_traversal_draws_every_level_set_exactly_and_tidily() {
     );
 }
 
+/// The compiled traversal draws exactly the corrected one's commands, bit
+/// for bit, over every case (its table covers the subgrids with no node at
+/// the level; the others walk the trees).
+#[test]
+fn compiled_traversal_draws_the_corrected_traversals_commands() {
+    let bits = |cmds: Vec<Command<Point2>>| {
+        cmds.into_iter().map(|c| c.map(|p| (p.x.to_bits(), p.y.to_bits()))).collect::<Vec<_>>()
+    };
+    let mut n = 0;
+    for (c, k) in cases() {
+        n += 1;
+        assert_eq!(
+            bits(contour(c, k, Traversal::Compiled)),
+            bits(contour(c, k, Traversal::Corrected)),
+            "{c:?} at {k}"
+        );
+    }
+    assert_eq!(n, 6875);
+}
+
 #[test]
 fn literal_traversal_fails_only_with_nodes_at_the_level() {
     let mut with_ties = 0;

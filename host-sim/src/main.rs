@@ -435,7 +435,9 @@ enum Format {
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 enum TraversalArg {
-    /// The paper's Figure 8 with the pen restored after equal-valued edges.
+    /// The corrected traversal compiled into a table at build time (the same commands, faster).
+    Compiled,
+    /// The paper's Figure 8 with the pen restored after equal-valued edges, walking the trees.
     Corrected,
     /// Figure 8 exactly as printed (wrong for ~1% of subgrids with nodes at the level).
     Literal,
@@ -459,7 +461,7 @@ struct ContourArgs {
     #[arg(long)]
     stats: bool,
     /// Which traversal of the contouring trees.
-    #[arg(long, value_enum, default_value = "corrected")]
+    #[arg(long, value_enum, default_value = "compiled")]
     traversal: TraversalArg,
     /// View settings (for --format svg).
     #[command(flatten)]
@@ -613,6 +615,7 @@ fn contour(args: &ContourArgs) -> Result<()> {
         None => std::thread::available_parallelism().map_or(1, |n| n.get()),
     };
     let traversal = match args.traversal {
+        TraversalArg::Compiled => Traversal::Compiled,
         TraversalArg::Corrected => Traversal::Corrected,
         TraversalArg::Literal => Traversal::Literal,
     };

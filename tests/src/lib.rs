@@ -33,7 +33,7 @@ pub fn real_wire(name: &str) -> isoscope_sim::link::WireVolume {
 pub fn contour_demo(demo: Demo, n: usize, levels: &[f32], planes: &[Plane], threads: usize) -> Contoured {
     let data = demo_samples(demo, n);
     let volume = Volume::new(&data, n, n, n).expect("demo volume");
-    let job = Job { planes, levels, traversal: Traversal::Corrected, threads, keep: true, every: 1 };
+    let job = Job { planes, levels, traversal: Traversal::Compiled, threads, keep: true, every: 1 };
     contour_volume(&volume, &job, None).expect("contouring a demo")
 }
 

@@ -8,6 +8,8 @@
 //!   compile time.
 //! - [`trace`]: the paper's Figure 8 traversal (and its correction for nodes
 //!   at the level).
+//! - [`compiled`]: that traversal worked out at compile time for every
+//!   subgrid with no node at the level: a lookup per crossing subgrid.
 //! - [`pen`]: placement of crossings and tidy drawing commands.
 //! - [`voxel`]: the sample types a grid may hold, the [`Voxel`] trait.
 //! - [`grid`]: [`grid::Grid2`] and [`grid::Volume`] views with strides.
@@ -22,6 +24,7 @@
 //! its direction code) and traversed for every level, the paper's point.
 //! Subgrids touching a NaN or infinite sample are skipped and counted.
 
+pub mod compiled;
 pub mod grid;
 pub mod pen;
 pub mod subgrid;
@@ -127,7 +130,7 @@ pub fn contour_subgrid<P, S: CommandSink<P>>(
     place: &impl Fn(f32, f32) -> P,
     sink: &mut S,
 ) -> Result<u64, S::Error> {
-    let tpl = Template::for_code(sub.code());
+    let code = sub.code();
     let (lo, hi) = sub.range();
     let mut sent = 0u64;
     for (li, &level) in levels.iter().enumerate() {
@@ -139,9 +142,34 @@ pub fn contour_subgrid<P, S: CommandSink<P>>(
             sent += 1;
             sink.command(li, c.map(|(x, y)| place(x, y)))
         };
+        let mut below = 0u8;
+        let mut on = false;
+        for (n, &v) in sub.values().iter().enumerate() {
+            below |= u8::from(v <= level) << n;
+            on |= v == level;
+        }
+        if !on
+            && traversal == Traversal::Compiled
+            && let Some(program) = compiled::program(code, below)
+        {
+            // The compiled traversal: every crossing inside an edge.
+            for (conn, e) in program.steps() {
+                let p = at.locate_edge(sub, level, e);
+                placed.step(
+                    match conn {
+                        Conn::SetPoint => Command::MoveTo(p),
+                        Conn::DrawTo => Command::LineTo(p),
+                    },
+                    &mut send,
+                )?;
+            }
+            placed.finish(&mut send)?;
+            continue;
+        }
+        let tpl = Template::for_code(code);
         let mut out = |c: Command<Crossing>| placed.step(c.map(|x| at.locate(sub, level, x)), &mut send);
         let mut err = None;
-        if sub.values().contains(&level) {
+        if on {
             // Nodes at the level: the pen tidies repeated crossings,
             // equal-valued edges met twice and lone points.
             let mut pen = Pen::new();

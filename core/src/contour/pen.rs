@@ -80,19 +80,23 @@ impl Placement {
                 Node::C => (xc, yc),
             },
             (None, None) => (xc, yc),
-            (None, Some(e)) => {
-                let t = sub.crossing(e, level);
-                match e {
-                    Edge::B0 => (self.x0 + t, self.y0),
-                    Edge::B1 => (self.x1, self.y0 + t),
-                    Edge::B2 => (self.x0 + t, self.y1),
-                    Edge::B3 => (self.x0, self.y0 + t),
-                    Edge::S0 => (self.x0 + 0.5 * t, self.y0 + 0.5 * t),
-                    Edge::S1 => (self.x1 - 0.5 * t, self.y0 + 0.5 * t),
-                    Edge::S2 => (self.x1 - 0.5 * t, self.y1 - 0.5 * t),
-                    Edge::S3 => (self.x0 + 0.5 * t, self.y1 - 0.5 * t),
-                }
-            }
+            (None, Some(e)) => self.locate_edge(sub, level, e),
+        }
+    }
+
+    /// The grid coordinates of the level's crossing strictly inside `e`.
+    #[inline(always)]
+    pub fn locate_edge(&self, sub: &Subgrid, level: f32, e: Edge) -> (f32, f32) {
+        let t = sub.crossing(e, level);
+        match e {
+            Edge::B0 => (self.x0 + t, self.y0),
+            Edge::B1 => (self.x1, self.y0 + t),
+            Edge::B2 => (self.x0 + t, self.y1),
+            Edge::B3 => (self.x0, self.y0 + t),
+            Edge::S0 => (self.x0 + 0.5 * t, self.y0 + 0.5 * t),
+            Edge::S1 => (self.x1 - 0.5 * t, self.y0 + 0.5 * t),
+            Edge::S2 => (self.x1 - 0.5 * t, self.y1 - 0.5 * t),
+            Edge::S3 => (self.x0 + 0.5 * t, self.y1 - 0.5 * t),
         }
     }
 }

@@ -190,6 +190,18 @@ impl DirectionCode {
     }
 }
 
+/// The smaller of two finite values.
+#[inline(always)]
+const fn min2(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
+}
+
+/// The larger of two finite values.
+#[inline(always)]
+const fn max2(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
 /// The five node values of one subgrid, all finite.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -237,37 +249,38 @@ impl Subgrid {
     /// The mean is formed from quarters so that it cannot overflow; it always
     /// lies between the smallest and the largest corner.
     #[inline(always)]
-    pub(crate) fn from_finite(ll: f32, lr: f32, ur: f32, ul: f32) -> Self {
+    pub(crate) const fn from_finite(ll: f32, lr: f32, ur: f32, ul: f32) -> Self {
         let c = (ll * 0.25 + lr * 0.25) + (ur * 0.25 + ul * 0.25);
         // Finite inputs: plain comparisons suffice (no NaN to propagate).
-        let min = |a: f32, b: f32| if a < b { a } else { b };
-        let max = |a: f32, b: f32| if a > b { a } else { b };
-        let lo = min(min(ll, lr), min(ur, ul));
-        let hi = max(max(ll, lr), max(ur, ul));
-        Self { values: [ll, lr, ur, ul, min(max(c, lo), hi), lo, hi, 0.0] }
+        let lo = min2(min2(ll, lr), min2(ur, ul));
+        let hi = max2(max2(ll, lr), max2(ur, ul));
+        Self { values: [ll, lr, ur, ul, min2(max2(c, lo), hi), lo, hi, 0.0] }
     }
 
     /// The value at a node.
     #[inline(always)]
-    pub fn value(&self, node: Node) -> f32 {
+    pub const fn value(&self, node: Node) -> f32 {
         self.at(node as usize)
     }
 
     /// The value at node index `i` (0..5).
     #[inline(always)]
-    pub(crate) fn at(&self, i: usize) -> f32 {
-        self.values.get(i & 7).copied().unwrap_or(f32::NAN)
+    pub(crate) const fn at(&self, i: usize) -> f32 {
+        match crate::contour::tree::get(&self.values, i & 7) {
+            Some(&v) => v,
+            None => f32::NAN,
+        }
     }
 
     /// All five values, indexed by [`Node::index`].
-    pub fn values(&self) -> [f32; 5] {
+    pub const fn values(&self) -> [f32; 5] {
         let [ll, lr, ur, ul, c, ..] = self.values;
         [ll, lr, ur, ul, c]
     }
 
     /// The smallest and the largest value (the centre lies between them).
     #[inline(always)]
-    pub fn range(&self) -> (f32, f32) {
+    pub const fn range(&self) -> (f32, f32) {
         (self.at(5), self.at(6))
     }
 
@@ -279,17 +292,17 @@ impl Subgrid {
 
     /// The downhill direction of every edge.
     #[inline(always)]
-    pub fn code(&self) -> DirectionCode {
+    pub const fn code(&self) -> DirectionCode {
         let v = &self.values;
         let c = v[4];
-        let b = u8::from(v[0] >= v[1])
-            | u8::from(v[1] >= v[2]) << 1
-            | u8::from(v[2] >= v[3]) << 2
-            | u8::from(v[3] >= v[0]) << 3
-            | u8::from(v[0] >= c) << 4
-            | u8::from(v[1] >= c) << 5
-            | u8::from(v[2] >= c) << 6
-            | u8::from(v[3] >= c) << 7;
+        let b = ((v[0] >= v[1]) as u8)
+            | (((v[1] >= v[2]) as u8) << 1)
+            | (((v[2] >= v[3]) as u8) << 2)
+            | (((v[3] >= v[0]) as u8) << 3)
+            | (((v[0] >= c) as u8) << 4)
+            | (((v[1] >= c) as u8) << 5)
+            | (((v[2] >= c) as u8) << 6)
+            | (((v[3] >= c) as u8) << 7);
         DirectionCode(b)
     }
 

@@ -49,52 +49,55 @@ impl Entry {
 
     /// The grid node this entry is a copy of.
     #[inline(always)]
-    pub fn node(&self) -> Node {
+    pub const fn node(&self) -> Node {
         node_of(self.node)
     }
 
     /// The node of the tree parent (the upper end of the tree edge that
     /// leads here); the node itself for a root.
     #[inline(always)]
-    pub fn parent(&self) -> Node {
+    pub const fn parent(&self) -> Node {
         node_of(self.parent)
     }
 
     /// Index of [`Entry::node`] (0..5).
     #[inline(always)]
-    pub(crate) fn node_index(&self) -> usize {
-        usize::from(self.node)
+    pub(crate) const fn node_index(&self) -> usize {
+        self.node as usize
     }
 
     /// True for a tree's root.
     #[inline(always)]
-    pub fn is_root(&self) -> bool {
+    pub const fn is_root(&self) -> bool {
         self.node == self.parent
     }
 
     /// The tree edge from the parent, `None` for a root.
     #[inline(always)]
-    pub fn edge(&self) -> Option<Edge> {
+    pub const fn edge(&self) -> Option<Edge> {
         Edge::between(self.parent(), self.node())
     }
 
     /// The crossing of the tree edge from the parent when the level lies
     /// strictly inside it (the node itself for a root).
     #[inline(always)]
-    pub fn crossing(&self) -> Crossing {
-        Crossing::from_index(usize::from(self.crossing)).unwrap_or(Crossing::node(Node::C))
+    pub const fn crossing(&self) -> Crossing {
+        match Crossing::from_index(self.crossing as usize) {
+            Some(x) => x,
+            None => Crossing::node(Node::C),
+        }
     }
 
     /// Index one past this entry's subtree in the template's entry array.
     #[inline(always)]
-    pub fn subtree_end(&self) -> usize {
-        usize::from(self.end)
+    pub const fn subtree_end(&self) -> usize {
+        self.end as usize
     }
 
     /// True when this is the first copy of a sink node (out-degree 0) in the
     /// tree's pre-order: the paper places a SETPOINT there.
     #[inline(always)]
-    pub fn is_first_sink(&self) -> bool {
+    pub const fn is_first_sink(&self) -> bool {
         self.flags & 1 != 0
     }
 
@@ -102,13 +105,22 @@ impl Entry {
     /// its tree's pre-order; the entry is a "new lowest value" when its value
     /// is below all of them.
     #[inline(always)]
-    pub fn earlier(&self) -> u8 {
+    pub const fn earlier(&self) -> u8 {
         self.flags >> 3
     }
 }
 
+/// Element `i` of `s`, if there is one: `<[T]>::get` for `const fn`s.
 #[inline(always)]
-fn node_of(i: u8) -> Node {
+pub(crate) const fn get<T>(s: &[T], i: usize) -> Option<&T> {
+    match s.split_at_checked(i) {
+        Some((_, rest)) => rest.first(),
+        None => None,
+    }
+}
+
+#[inline(always)]
+const fn node_of(i: u8) -> Node {
     match i {
         0 => Node::LL,
         1 => Node::LR,
@@ -136,53 +148,75 @@ pub struct Template {
 impl Template {
     /// The precomputed template for a direction code.
     #[inline(always)]
-    pub fn for_code(code: DirectionCode) -> &'static Template {
-        TEMPLATES.get(usize::from(code.0)).unwrap_or(&EMPTY)
+    pub const fn for_code(code: DirectionCode) -> &'static Template {
+        match get(&TEMPLATES, code.0 as usize) {
+            Some(t) => t,
+            None => &EMPTY,
+        }
     }
 
     /// How many trees (roots): 0, 1 or 2.
     #[inline(always)]
-    pub fn tree_count(&self) -> usize {
-        usize::from(self.trees)
+    pub const fn tree_count(&self) -> usize {
+        self.trees as usize
     }
 
     /// All entries of all trees.
     #[inline(always)]
-    pub fn entries(&self) -> &[Entry] {
-        let n = self.tree_end.get(self.tree_count().wrapping_sub(1)).copied().unwrap_or(0);
-        self.entries.get(..usize::from(n)).unwrap_or(&[])
+    pub const fn entries(&self) -> &[Entry] {
+        let n = match get(&self.tree_end, self.tree_count().wrapping_sub(1)) {
+            Some(&n) => n as usize,
+            None => 0,
+        };
+        match self.entries.split_at_checked(n) {
+            Some((entries, _)) => entries,
+            None => &[],
+        }
     }
 
     /// The entries whose tree edge contains the level, as a bit set over
     /// entry indices, given the nodes at or below the level (`below`, bit
     /// `n` for node `n`). Roots are not included.
     #[inline(always)]
-    pub fn crossing_entries(&self, below: u8) -> u32 {
+    pub const fn crossing_entries(&self, below: u8) -> u32 {
         let mut nodes = 0;
         let mut parents = 0;
-        for (n, (&a, &p)) in self.node_at.iter().zip(&self.parent_at).enumerate() {
-            let is_below = 0u32.wrapping_sub(u32::from(below >> n) & 1);
-            nodes |= a & is_below;
-            parents |= p & !is_below;
+        let [a0, a1, a2, a3, a4] = self.node_at;
+        let [p0, p1, p2, p3, p4] = self.parent_at;
+        let (a, p) = ([a0, a1, a2, a3, a4], [p0, p1, p2, p3, p4]);
+        let mut n = 0;
+        while n < 5 {
+            let is_below = 0u32.wrapping_sub((below >> n) as u32 & 1);
+            if let (Some(&a), Some(&p)) = (get(&a, n), get(&p, n)) {
+                nodes |= a & is_below;
+                parents |= p & !is_below;
+            }
+            n += 1;
         }
         nodes & parents
     }
 
     /// Index one past the last entry of the first tree.
     #[inline(always)]
-    pub(crate) fn first_tree_end(&self) -> usize {
-        usize::from(self.tree_end[0])
+    pub(crate) const fn first_tree_end(&self) -> usize {
+        self.tree_end[0] as usize
     }
 
     /// The entry index range of tree `t` (empty past the last tree).
     #[inline(always)]
-    pub fn tree_range(&self, t: usize) -> core::ops::Range<usize> {
+    pub const fn tree_range(&self, t: usize) -> core::ops::Range<usize> {
         if t >= self.tree_count() {
             return 0..0;
         }
-        let end = |t: usize| self.tree_end.get(t).map_or(0, |&e| usize::from(e));
-        let start = if t == 0 { 0 } else { end(t - 1) };
-        start..end(t)
+        let end = match get(&self.tree_end, t) {
+            Some(&e) => e as usize,
+            None => 0,
+        };
+        let start = match get(&self.tree_end, t.wrapping_sub(1)) {
+            Some(&e) if t > 0 => e as usize,
+            _ => 0,
+        };
+        start..end
     }
 }
 

@@ -455,7 +455,7 @@ impl<'a> Stream<'a> {
         let memory = self.slots.len();
         let (slots, rest) = self.slots.split_at_mut(at.min(self.slots.len()));
         let mut spill = Geometry::lent(rest, held);
-        if let Ok(mut rc) = RowContourer::new::<Infallible>(t.spec.levels.as_slice(), Traversal::Corrected) {
+        if let Ok(mut rc) = RowContourer::new::<Infallible>(t.spec.levels.as_slice(), Traversal::Compiled) {
             // (Making the contourer clears its 2 KB of scratch: a short row
             // should not pay that alone.)
             let mut done = 0usize;
