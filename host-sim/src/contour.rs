@@ -9,8 +9,8 @@ use anyhow::{Context, Result, anyhow};
 use isoscope_core::command::{Command, Point3};
 use isoscope_core::contour::ContourStats;
 use isoscope_core::contour::Voxel;
-use isoscope_core::contour::grid::{Plane, Volume};
-use isoscope_core::contour::surface::{SliceId, SurfaceSink, band_rows, contour_band, contour_slice};
+use isoscope_core::contour::grid::{Plane, Planes, Volume};
+use isoscope_core::contour::surface::{SliceId, SurfaceSink, contour_slab, contour_slice};
 use isoscope_core::contour::trace::Traversal;
 use std::convert::Infallible;
 use std::io::Write;
@@ -79,36 +79,32 @@ impl SurfaceSink for Checksum {
     }
 }
 
-/// One unit of parallel work: a band of cell rows across every slice of a
-/// plane.
+/// One unit of parallel work: a slab of x-y slices and the cell rows
+/// between them across every slice of the other planes, or one slice.
 #[derive(Debug, Clone, PartialEq, Eq)]
-struct Band {
-    plane: Plane,
-    rows: std::ops::Range<usize>,
-    /// One slice only (when contouring every n-th slice).
-    slice: Option<usize>,
+enum Band {
+    Slab(std::ops::Range<usize>),
+    Slice(SliceId),
 }
 
-/// Rows per band: small enough to balance the threads, large enough that
-/// a band is worth a task.
+/// Slices per slab: small enough to balance the threads, large enough that
+/// a slab is worth a task.
 fn bands<T: Voxel>(volume: &Volume<'_, T>, planes: &[Plane], threads: usize, every: usize) -> Vec<Band> {
     let mut out = vec![];
     if every > 1 {
         for &plane in planes {
             for index in (0..volume.slice_count(plane)).step_by(every) {
-                out.push(Band { plane, rows: 0..0, slice: Some(index) });
+                out.push(Band::Slice(SliceId { plane, index }));
             }
         }
         return out;
     }
-    for &plane in planes {
-        let rows = band_rows(volume, plane);
-        let per = rows.div_ceil(8 * threads).max(1);
-        let mut r = 0;
-        while r < rows {
-            out.push(Band { plane, rows: r..(r + per).min(rows), slice: None });
-            r += per;
-        }
+    let nz = volume.dims().2;
+    let per = nz.div_ceil(8 * threads).max(1);
+    let mut z = 0;
+    while z < nz {
+        out.push(Band::Slab(z..(z + per).min(nz)));
+        z += per;
     }
     out
 }
@@ -126,6 +122,7 @@ pub fn contour_volume<T: Voxel + Sync>(
     }
     let threads = job.threads.max(1);
     let bands = bands(volume, job.planes, threads, job.every);
+    let planes = job.planes.iter().fold(Planes::NONE, |p, &plane| p.with(plane));
     type BandResult = (Vec<(SliceId, u32, Command<Point3>)>, ContourStats);
     let results: Vec<Mutex<Option<BandResult>>> = bands.iter().map(|_| Mutex::new(None)).collect();
     let next = AtomicUsize::new(0);
@@ -138,11 +135,9 @@ pub fn contour_volume<T: Voxel + Sync>(
             let (levels, traversal) = (job.levels, job.traversal);
             let run = |sink: &mut dyn FnMut(SliceId, usize, Command<Point3>)| {
                 let mut s = FnSink(sink);
-                match band.slice {
-                    Some(index) => {
-                        contour_slice(volume, SliceId { plane: band.plane, index }, levels, traversal, &mut s)
-                    }
-                    None => contour_band(volume, band.plane, band.rows.clone(), levels, traversal, &mut s),
+                match band {
+                    Band::Slice(slice) => contour_slice(volume, *slice, levels, traversal, &mut s),
+                    Band::Slab(zs) => contour_slab(volume, planes, zs.clone(), levels, traversal, &mut s),
                 }
             };
             let stats = if job.keep {
@@ -155,7 +150,7 @@ pub fn contour_volume<T: Voxel + Sync>(
                 std::hint::black_box(sum.0);
                 stats
             }
-            .map_err(|e| anyhow!("{} rows {:?}: {e}", band.plane, band.rows))?;
+            .map_err(|e| anyhow!("{band:?}: {e}"))?;
             *results[i].lock().map_err(|_| anyhow!("a worker thread panicked"))? = Some((cmds, stats));
             if let Some(p) = progress {
                 p.inc();

@@ -41,7 +41,7 @@ use core::ops::Range;
 use grid::{Grid2, GridError};
 use pen::{Pen, Placed, Placement};
 use subgrid::Subgrid;
-use sweep::{BLOCK, Scratch, Sweep, lane};
+use sweep::{BLOCK, Classes, Scratch, Sweep, lane};
 use trace::{Conn, Crossing, Traversal, visit};
 use tree::Template;
 
@@ -219,6 +219,7 @@ pub fn contour_subgrid<P, S: CommandSink<P>>(
 #[derive(Debug)]
 pub struct RowContourer<'l> {
     sweep: Sweep<'l>,
+    classes: [Classes; 3],
 }
 
 impl<'l> RowContourer<'l> {
@@ -228,7 +229,7 @@ impl<'l> RowContourer<'l> {
     /// [`ContourError::NonFiniteLevel`].
     pub fn new<E>(levels: &'l [f32], traversal: Traversal) -> Result<Self, ContourError<E>> {
         check_levels(levels)?;
-        Ok(Self { sweep: Sweep::new(levels, traversal) })
+        Ok(Self { sweep: Sweep::new(levels, traversal), classes: [[0; BLOCK + 9]; 3] })
     }
 
     /// Contour the cells between the sample rows `lower` (grid row `j`) and
@@ -252,7 +253,9 @@ impl<'l> RowContourer<'l> {
             let n = (nx - 1 - i0).min(BLOCK);
             let r0 = lower.get(i0..=i0 + n).unwrap_or(&[]);
             let r1 = upper.get(i0..=i0 + n).unwrap_or(&[]);
-            self.sweep.run_rows(r0, r1, |k| Placement::new(i0 + k, j), |_, x, y| place(x, y), sink, stats)?;
+            let at = |k| Placement::new(i0 + k, j);
+            let [c0, c1, c2] = &mut self.classes;
+            self.sweep.run_rows(r0, r1, [c0, c1, c2], at, |_, x, y| place(x, y), sink, stats)?;
             i0 += n;
         }
         stats.cells += nx.saturating_sub(1) as u64;
@@ -304,10 +307,19 @@ pub fn contour_rows<T: Voxel, P, S: CommandSink<P>>(
             let n = (nx - 1 - i0).min(BLOCK);
             let start = offset + j * sy + i0 * sx;
             let [b0, b1, ..] = &mut scratch.bufs;
+            let [c0, c1, c2, ..] = &mut scratch.classes;
             let r0 = lane(data, start, sx, n + 1, b0);
             let r1 = lane(data, start + sy, sx, n + 1, b1);
             sweep
-                .run_rows(r0, r1, |k| Placement::new(i0 + k, j), |_, x, y| place(x, y), sink, &mut stats)
+                .run_rows(
+                    r0,
+                    r1,
+                    [c0, c1, c2],
+                    |k| Placement::new(i0 + k, j),
+                    |_, x, y| place(x, y),
+                    sink,
+                    &mut stats,
+                )
                 .map_err(ContourError::Sink)?;
             i0 += n;
         }

@@ -7,10 +7,10 @@
 
 use super::grid::{Plane, Planes, Volume};
 use super::pen::Placement;
-use super::sweep::{BLOCK, Scratch, Sweep, lane};
+use super::sweep::{BLOCK, Scratch, Sweep, and_across, and_along, each_busy, lane};
 use super::trace::Traversal;
 use super::voxel::Voxel;
-use super::{ContourError, ContourStats, check_levels, contour_grid, contour_rows};
+use super::{ContourError, ContourStats, check_levels, contour_grid};
 use crate::command::{Command, CommandSink, Point3};
 use core::ops::Range;
 
@@ -77,109 +77,149 @@ pub fn contour_slice<T: Voxel, S: SurfaceSink>(
     contour_grid(&grid, levels, traversal, |u, v| plane.to_voxel(s, u, v), &mut adapter)
 }
 
-/// The number of cell rows of `plane`'s slices (along the slice's second
-/// axis: y for XY, z for XZ and YZ); bands passed to [`contour_band`] index
-/// these rows.
-pub fn band_rows<T: Voxel>(volume: &Volume<'_, T>, plane: Plane) -> usize {
-    let (_, ny, nz) = volume.dims();
-    match plane {
-        Plane::XY => ny - 1,
-        Plane::XZ | Plane::YZ => nz - 1,
-    }
-}
-
-/// Contour cell rows `rows` (see [`band_rows`]) of every slice of `plane`.
+/// Contour the z-slab `zs` of every slice of `planes` at every level: the
+/// x-y slices `z` and the x-z and y-z cell rows `z` (the cells between the
+/// x-y slices `z` and `z + 1`) for `z` in `zs`, all three planes at once,
+/// in memory order.
 ///
-/// Within each slice, commands come in row-major cell order, exactly as
-/// [`contour_slice`] gives them, so splitting a plane into bands and joining
-/// each slice's commands band by band reproduces the slice. Across slices the
-/// order follows memory: x-y and x-z slices one after the other, y-z slices
-/// interleaved, swept with x innermost so that every sample is read from
-/// contiguous memory (a y-z slice alone strides through the whole volume).
+/// For each `z` and each row `y` it reads the four sample rows around it
+/// (`y` and `y + 1` of slices `z` and `z + 1`), contiguous in x, classes
+/// each sample once ([`super::sweep`]), and finds the cells no level meets
+/// in all three planes from those classes: the x-y cells of row `y`, the
+/// x-z cells of row `z` of slice `y`, and the y-z cells `(y, z)` of every
+/// slice `x`. Within each slice commands come in row-major cell order,
+/// exactly as [`contour_slice`] gives them, so splitting a volume into
+/// slabs and joining each slice's commands slab by slab reproduces the
+/// slice; across slices they interleave.
 ///
 /// # Errors
 /// [`ContourError::NonFiniteLevel`] before anything is drawn, or the sink's
-/// error. Rows past the end are ignored.
-pub fn contour_band<T: Voxel, S: SurfaceSink>(
+/// error. Slices past the end are ignored.
+pub fn contour_slab<T: Voxel, S: SurfaceSink>(
     volume: &Volume<'_, T>,
-    plane: Plane,
-    rows: Range<usize>,
+    planes: Planes,
+    zs: Range<usize>,
     levels: &[f32],
     traversal: Traversal,
     sink: &mut S,
 ) -> Result<ContourStats, ContourError<S::Error>> {
     check_levels(levels)?;
-    let rows = rows.start..rows.end.min(band_rows(volume, plane));
-    if plane != Plane::YZ {
-        let mut stats = ContourStats::default();
-        for index in 0..volume.slice_count(plane) {
-            let slice = SliceId { plane, index };
-            let grid = volume.slice(plane, index).map_err(ContourError::Grid)?;
-            let s = index as f32;
-            let mut adapter = SliceSink { sink, slice };
-            let place = |u, v| plane.to_voxel(s, u, v);
-            stats += contour_rows(&grid, rows.clone(), levels, traversal, place, &mut adapter)?;
-        }
-        return Ok(stats);
-    }
-    // y-z slices, x innermost: cell (y, z) of slice x has its corners in four
-    // contiguous x rows.
-    let (nx, ny, _) = volume.dims();
+    let (nx, ny, nz) = volume.dims();
+    let zs = zs.start..zs.end.min(nz);
+    let (xy, xz, yz) = (planes.contains(Plane::XY), planes.contains(Plane::XZ), planes.contains(Plane::YZ));
     let data = volume.data();
     let sweep = Sweep::new(levels, traversal);
     let mut stats = ContourStats::default();
     let mut scratch = Scratch::new();
-    let mut adapter = LaneSink { sink };
-    let rows_len = rows.len();
-    for z in rows {
-        for y in 0..ny - 1 {
-            let row = |y: usize, z: usize| (z * ny + y) * nx;
+    let row = |y: usize, z: usize| (z * ny + y) * nx;
+    for z in zs.clone() {
+        let up = z + 1 < nz;
+        let fz = z as f32;
+        for y in 0..ny {
+            let right = y + 1 < ny;
             let mut x0 = 0;
             while x0 < nx {
-                let n = (nx - x0).min(BLOCK);
+                // Samples x0..=x1 (cells x0..x1 of x-y and x-z rows; y-z
+                // slices x0..x1, the last block's up to nx).
+                let x1 = (x0 + BLOCK).min(nx - 1);
+                let n = x1 + 1 - x0;
+                let ys = if x1 + 1 == nx { n } else { n - 1 };
                 let [b0, b1, b2, b3] = &mut scratch.bufs;
-                let lanes = [
-                    lane(data, row(y, z) + x0, 1, n, b0),
-                    lane(data, row(y + 1, z) + x0, 1, n, b1),
-                    lane(data, row(y + 1, z + 1) + x0, 1, n, b2),
-                    lane(data, row(y, z + 1) + x0, 1, n, b3),
-                ];
-                sweep
-                    .run(
-                        lanes,
-                        &mut scratch.busy,
-                        |_| Placement::new(y, z),
-                        |k, u, v| (x0 + k, Point3::new((x0 + k) as f32, u, v)),
-                        &mut adapter,
-                        &mut stats,
-                    )
+                let [c0, c1, c2, c3, m] = &mut scratch.classes;
+                // Rows (y, z), (y + 1, z), (y, z + 1), (y + 1, z + 1).
+                let l0 = lane(data, row(y, z) + x0, 1, n, b0);
+                sweep.classify(l0, c0);
+                let l1 = if right { lane(data, row(y + 1, z) + x0, 1, n, b1) } else { &[] };
+                let h0 = if up { lane(data, row(y, z + 1) + x0, 1, n, b2) } else { &[] };
+                let h1 = if right && up { lane(data, row(y + 1, z + 1) + x0, 1, n, b3) } else { &[] };
+                if xy && right {
+                    sweep.classify(l1, c1);
+                    and_along(m, c0, c1);
+                    let slice = SliceId { plane: Plane::XY, index: z };
+                    each_busy(m, n - 1, |k| {
+                        let (Some(&a), Some(&b), Some(&c), Some(&d)) =
+                            (l0.get(k), l0.get(k + 1), l1.get(k + 1), l1.get(k))
+                        else {
+                            return Ok(());
+                        };
+                        let place = |u, v| Plane::XY.to_voxel(fz, u, v);
+                        let at = Placement::new(x0 + k, y);
+                        sweep.cell(
+                            [a, b, c, d],
+                            at,
+                            &place,
+                            &mut SliceSink { sink: &mut *sink, slice },
+                            &mut stats,
+                        )
+                    })
                     .map_err(ContourError::Sink)?;
-                x0 += n;
+                }
+                if xz && up {
+                    sweep.classify(h0, c2);
+                    and_along(m, c0, c2);
+                    let slice = SliceId { plane: Plane::XZ, index: y };
+                    let fy = y as f32;
+                    each_busy(m, n - 1, |k| {
+                        let (Some(&a), Some(&b), Some(&c), Some(&d)) =
+                            (l0.get(k), l0.get(k + 1), h0.get(k + 1), h0.get(k))
+                        else {
+                            return Ok(());
+                        };
+                        let place = |u, v| Plane::XZ.to_voxel(fy, u, v);
+                        let at = Placement::new(x0 + k, z);
+                        sweep.cell(
+                            [a, b, c, d],
+                            at,
+                            &place,
+                            &mut SliceSink { sink: &mut *sink, slice },
+                            &mut stats,
+                        )
+                    })
+                    .map_err(ContourError::Sink)?;
+                }
+                if yz && right && up {
+                    if !xy {
+                        sweep.classify(l1, c1);
+                    }
+                    if !xz {
+                        sweep.classify(h0, c2);
+                    }
+                    sweep.classify(h1, c3);
+                    and_across(m, [c0, c1, c2, c3]);
+                    each_busy(m, ys, |k| {
+                        let (Some(&a), Some(&b), Some(&c), Some(&d)) =
+                            (l0.get(k), l1.get(k), h1.get(k), h0.get(k))
+                        else {
+                            return Ok(());
+                        };
+                        let slice = SliceId { plane: Plane::YZ, index: x0 + k };
+                        let fx = (x0 + k) as f32;
+                        let place = |u, v| Plane::YZ.to_voxel(fx, u, v);
+                        let at = Placement::new(y, z);
+                        sweep.cell(
+                            [a, b, c, d],
+                            at,
+                            &place,
+                            &mut SliceSink { sink: &mut *sink, slice },
+                            &mut stats,
+                        )
+                    })
+                    .map_err(ContourError::Sink)?;
+                }
+                x0 = if x1 + 1 == nx { nx } else { x1 };
             }
         }
+        stats.cells += (u64::from(xy) * ((nx - 1) * (ny - 1)) as u64)
+            + u64::from(up)
+                * (u64::from(xz) * (ny * (nx - 1)) as u64 + u64::from(yz) * (nx * (ny - 1)) as u64);
     }
-    stats.cells = (nx * (ny - 1) * rows_len) as u64;
     Ok(stats)
 }
 
-/// Forwards y-z commands, whose points carry their slice (x) index.
-struct LaneSink<'s, S> {
-    sink: &'s mut S,
-}
-
-impl<S: SurfaceSink> CommandSink<(usize, Point3)> for LaneSink<'_, S> {
-    type Error = S::Error;
-    #[inline(always)]
-    fn command(&mut self, level: usize, command: Command<(usize, Point3)>) -> Result<(), S::Error> {
-        let index = command.point().0;
-        self.sink.command(SliceId { plane: Plane::YZ, index }, level, command.map(|(_, p)| p))
-    }
-}
-
 /// Contour every slice of every plane in `planes` at every level: the
-/// chicken-wire contour surface. Planes go in `xy, xz, yz` order; within
-/// each slice commands come in row-major cell order (see [`contour_band`]
-/// for the order across slices).
+/// chicken-wire contour surface. Within each slice commands come in
+/// row-major cell order; across slices they interleave (see
+/// [`contour_slab`]).
 ///
 /// # Errors
 /// [`ContourError::NonFiniteLevel`] before anything is drawn, or the sink's
@@ -191,10 +231,5 @@ pub fn contour_volume<T: Voxel, S: SurfaceSink>(
     traversal: Traversal,
     sink: &mut S,
 ) -> Result<ContourStats, ContourError<S::Error>> {
-    check_levels(levels)?;
-    let mut stats = ContourStats::default();
-    for plane in planes.iter() {
-        stats += contour_band(volume, plane, 0..band_rows(volume, plane), levels, traversal, sink)?;
-    }
-    Ok(stats)
+    contour_slab(volume, planes, 0..volume.dims().2, levels, traversal, sink)
 }

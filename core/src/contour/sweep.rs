@@ -1,21 +1,21 @@
 //! The inner loop: sweep rows of cells in blocks, skipping the cells no
 //! level meets.
 //!
-//! A block of up to [`BLOCK`] cells is seen as four lanes of corner values
-//! (lower-left, lower-right, upper-right, upper-left), borrowed straight from
-//! the samples when they are contiguous `f32`s and converted into scratch
-//! buffers otherwise. A branch-free pass marks the cells that may meet a
-//! level (not all corners above the highest level, not all below the
-//! lowest, or a corner that is not finite); it vectorises. Only the marked
-//! cells (a few percent in a real volume) build a subgrid and traverse its
-//! contouring trees; those touching a non-finite sample are skipped there
-//! and counted.
+//! Each sample is classed once a row ([`Sweep::classify`]): finite and
+//! above every level, finite and below every level, or neither (a level
+//! may pass it, or it is not finite), as two bits of a byte. A cell no
+//! level meets has its four corners in one class: the AND of their bytes
+//! is not zero. Both passes are branch-free loops over bytes that
+//! vectorise; the few cells left (a few percent in a real volume,
+//! [`each_busy`] finds them eight at a time) build a subgrid and run their
+//! traversal, and those touching a non-finite sample are skipped there and
+//! counted.
 //!
-//! Where the cells lie between two rows of samples ([`Sweep::run_rows`]:
-//! the engine's streaming rows, [`crate::contour::contour_rows`]), each
-//! sample is classed once instead (finite and above every level, finite
-//! and below every level) into bits, 32 cells a word, and the marked cells
-//! are the words' zero bits.
+//! The whole grid ([`crate::contour::contour_rows`]) and the engine's
+//! streaming rows ([`Sweep::run_rows`]) take cells between two rows of
+//! samples; a volume's slab of all three planes at once
+//! ([`crate::contour::surface::contour_slab`]) takes the four rows around
+//! a cell row of every plane.
 
 use super::pen::Placement;
 use super::subgrid::Subgrid;
@@ -58,33 +58,6 @@ pub(crate) fn lane<'a, T: Voxel>(
     buf.get(..n).unwrap_or(&[])
 }
 
-/// `min` and `max` without NaN handling (one instruction each); NaN is
-/// caught separately by the sum.
-#[inline(always)]
-fn min2(a: f32, b: f32) -> f32 {
-    if a < b { a } else { b }
-}
-
-#[inline(always)]
-fn max2(a: f32, b: f32) -> f32 {
-    if a > b { a } else { b }
-}
-
-/// Mark the cells (corners in four lanes) that may meet a level in
-/// `[klo, khi]`: not all corners above `khi`, not all below `klo`, or a
-/// corner that is not finite (the corner sum is then NaN or infinite; a sum
-/// that overflows from finite corners only sends the cell the slow way).
-#[inline(always)]
-fn mark(out: &mut [u8], [a, b, c, d]: [&[f32]; 4], klo: f32, khi: f32) {
-    for ((((o, &a), &b), &c), &d) in out.iter_mut().zip(a).zip(b).zip(c).zip(d) {
-        let lo = min2(min2(a, b), min2(c, d));
-        let hi = max2(max2(a, b), max2(c, d));
-        let sum = (a + b) + (c + d);
-        let quiet = (lo > khi) | (hi < klo);
-        *o = u8::from(!quiet | !sum.is_finite());
-    }
-}
-
 /// A float's bits as an integer in the same order (`-0.0` just below
 /// `+0.0`, NaNs beyond the infinities): an integer compare instead of a
 /// float compare and a move of the flags on the MCU.
@@ -114,65 +87,103 @@ impl Between {
     /// subtraction with carry on the M4, where a compare made a flag into
     /// a value with a conditional move: 38 instructions a column of two
     /// samples became 32).
+    /// Whether `k` is in: one subtraction and one unsigned compare.
     #[inline(always)]
-    fn mask(self, k: i32) -> u32 {
-        let x = u64::from(k.wrapping_sub(self.from) as u32);
-        (x.wrapping_sub(u64::from(self.span)) >> 32) as u32
+    fn contains(self, k: i32) -> bool {
+        (k.wrapping_sub(self.from) as u32) < self.span
     }
 }
 
-/// Words of sample bits a row pair's block takes (`BLOCK + 1` samples).
-const WORDS: usize = BLOCK / 32 + 1;
+/// A sample's class against the levels: [`ABOVE`] when it is finite and
+/// above every level, [`BELOW`] when finite and below every level, 0
+/// otherwise (a level may pass it, or it is not finite). A cell no level
+/// meets is one whose four corners share a class bit: the AND of their
+/// classes is not zero.
+pub(crate) const ABOVE: u8 = 1;
+/// See [`ABOVE`].
+pub(crate) const BELOW: u8 = 2;
 
-/// The cells between `lower` and `upper` (of equal length) whose four
-/// corners all lie in `above`, and those whose four all lie in `below`:
-/// bit `k % 32` of word `k / 32` is cell `k` (corners `k` and `k + 1` of
-/// both rows).
-// Not inlined: inside the engine's row contouring its dozen live values
-// spilled to the stack, and the Cortex-M4 counted 3.9M instructions for
-// hydrogen 32^3's classes, against 1.3M as a function of its own (one
-// profile run each; later runs of this code counted 1.3M to 2.1M).
-#[inline(never)]
-fn all_four(lower: &[f32], upper: &[f32], above: Between, below: Between) -> [[u32; WORDS]; 2] {
-    // First the columns (both samples in), one word of 32 at a time, shifted
-    // in from the top so that sample `k` lands on bit `k`.
-    let mut out = [[0u32; WORDS]; 2];
-    let [a_out, b_out] = &mut out;
-    for (((a_w, b_w), l), u) in
-        a_out.iter_mut().zip(b_out.iter_mut()).zip(lower.chunks(32)).zip(upper.chunks(32))
-    {
-        let (mut a, mut b) = (0u32, 0u32);
-        for (&l, &u) in l.iter().zip(u).rev() {
-            let (kl, ku) = (key(l), key(u));
-            a = (a << 1) | ((above.mask(kl) & above.mask(ku)) >> 31);
-            b = (b << 1) | ((below.mask(kl) & below.mask(ku)) >> 31);
-        }
-        (*a_w, *b_w) = (a, b);
-    }
-    // Then a cell is its column and the next (bit `k + 1` at `k`, across
-    // words).
-    for words in &mut out {
-        let mut next_word = 0u32;
-        for w in words.iter_mut().rev() {
-            let c = *w;
-            *w = c & ((c >> 1) | (next_word << 31));
-            next_word = c;
+/// Class bytes of up to `BLOCK + 1` samples, and room for a word's worth
+/// of quiet padding past them (so that a scan reads whole words).
+pub(crate) type Classes = [u8; BLOCK + 9];
+
+impl Sweep<'_> {
+    /// The classes of `row` into `out` (see [`ABOVE`]); the bytes past the
+    /// row are set quiet. Branch-free: it vectorises.
+    #[inline(always)]
+    pub(crate) fn classify(&self, row: &[f32], out: &mut Classes) {
+        let (above, below) = (self.above, self.below);
+        out.fill(ABOVE | BELOW);
+        for (o, &v) in out.iter_mut().zip(row) {
+            let k = key(v);
+            *o = u8::from(above.contains(k)) | (u8::from(below.contains(k)) << 1);
         }
     }
-    out
+}
+
+/// `m[k]`: the AND of the classes of samples `k` and `k + 1` of two rows,
+/// the cell between them (the last byte, past the cells, stays quiet).
+#[inline(always)]
+pub(crate) fn and_along(m: &mut Classes, a: &Classes, b: &Classes) {
+    let (a1, b1) = (a.get(1..).unwrap_or(&[]), b.get(1..).unwrap_or(&[]));
+    for ((((o, &a0), &a1), &b0), &b1) in m.iter_mut().zip(a).zip(a1).zip(b).zip(b1) {
+        *o = a0 & a1 & b0 & b1;
+    }
+    if let Some(last) = m.last_mut() {
+        *last = ABOVE | BELOW;
+    }
+}
+
+/// `m[k]`: the AND of the classes of sample `k` of four rows.
+#[inline(always)]
+pub(crate) fn and_across(m: &mut Classes, [a, b, c, d]: [&Classes; 4]) {
+    for ((((o, &a), &b), &c), &d) in m.iter_mut().zip(a).zip(b).zip(c).zip(d) {
+        *o = a & b & c & d;
+    }
+}
+
+/// Hand `f` the index of every zero byte of `m[..n]`, in order: the cells
+/// some level may meet (`m` holds the AND of their corners' classes). Eight
+/// bytes at a time: a word with no zero byte, the common case, costs one
+/// test.
+#[inline(always)]
+pub(crate) fn each_busy<E>(
+    m: &Classes,
+    n: usize,
+    mut f: impl FnMut(usize) -> Result<(), E>,
+) -> Result<(), E> {
+    const LOW7: u64 = 0x7F7F_7F7F_7F7F_7F7F;
+    let (words, _) = m.as_chunks::<8>();
+    for (w, bytes) in words.iter().enumerate() {
+        let first = 8 * w;
+        if first >= n {
+            break;
+        }
+        let v = u64::from_le_bytes(*bytes);
+        // The top bit of each zero byte, exactly (no borrow between bytes).
+        let mut zero = !(((v & LOW7) + LOW7) | v) & !LOW7;
+        if n - first < 8 {
+            zero &= (1u64 << (8 * (n - first))) - 1;
+        }
+        while zero != 0 {
+            f(first + zero.trailing_zeros() as usize / 8)?;
+            zero &= zero - 1;
+        }
+    }
+    Ok(())
 }
 
 /// Scratch space for one block: lane buffers for samples that need
-/// converting, and the marks.
+/// converting, the classes of four rows and the cells' AND of them.
 #[derive(Debug)]
 pub(crate) struct Scratch {
     pub bufs: [[f32; BLOCK + 1]; 4],
-    pub busy: [u8; BLOCK],
+    pub classes: [Classes; 5],
 }
 
 impl Scratch {
     pub(crate) const fn new() -> Self {
-        Self { bufs: [[0.0; BLOCK + 1]; 4], busy: [0; BLOCK] }
+        Self { bufs: [[0.0; BLOCK + 1]; 4], classes: [[0; BLOCK + 9]; 5] }
     }
 }
 
@@ -181,8 +192,6 @@ impl Scratch {
 pub(crate) struct Sweep<'l> {
     pub levels: &'l [f32],
     pub traversal: Traversal,
-    klo: f32,
-    khi: f32,
     /// Finite samples above every level, and below every level.
     above: Between,
     below: Between,
@@ -197,20 +206,21 @@ impl<'l> Sweep<'l> {
         // below `klo` (`0.0` is not below `-0.0`), and finite.
         let above = Between::new(key(khi + 0.0), key(f32::INFINITY));
         let below = Between::new(key(f32::NEG_INFINITY), key(if klo == 0.0 { -0.0 } else { klo }));
-        Self { levels, traversal, klo, khi, above, below }
+        Self { levels, traversal, above, below }
     }
 
-    /// [`Sweep::run`] for the cells between two rows of samples: cell `k`
-    /// has corners `lower[k], lower[k + 1], upper[k + 1], upper[k]` (the
-    /// shorter row, up to `BLOCK + 1` samples, sets the cells). The cells
-    /// no level meets are found from two bits a sample (above every level,
-    /// below every level; a non-finite sample is neither), 32 cells a word,
-    /// instead of four corners a cell.
+    /// Contour the cells between two rows of samples: cell `k` has corners
+    /// `lower[k], lower[k + 1], upper[k + 1], upper[k]` (the shorter row,
+    /// up to `BLOCK + 1` samples, sets the cells), sits at `at(k)` in its
+    /// grid, and its points are placed by `place(k, x, y)`. `scratch` holds
+    /// the rows' classes.
     #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn run_rows<P, S: CommandSink<P>>(
         &self,
         lower: &[f32],
         upper: &[f32],
+        [lo, up, m]: [&mut Classes; 3],
         at: impl Fn(usize) -> Placement,
         place: impl Fn(usize, f32, f32) -> P,
         sink: &mut S,
@@ -218,67 +228,22 @@ impl<'l> Sweep<'l> {
     ) -> Result<(), S::Error> {
         let samples = lower.len().min(upper.len()).min(BLOCK + 1);
         let (lower, upper) = (lower.get(..samples).unwrap_or(&[]), upper.get(..samples).unwrap_or(&[]));
-        let cells = samples.saturating_sub(1);
-        let [above, below] = all_four(lower, upper, self.above, self.below);
-        for (w, (above, below)) in above.into_iter().zip(below).enumerate() {
-            let first = 32 * w;
-            if first >= cells {
-                break;
-            }
-            let valid = if cells - first >= 32 { u32::MAX } else { (1u32 << (cells - first)) - 1 };
-            let mut busy = !(above | below) & valid;
-            while busy != 0 {
-                let k = first + busy.trailing_zeros() as usize;
-                busy &= busy - 1;
-                let (Some(&a), Some(&b), Some(&c), Some(&d)) =
-                    (lower.get(k), lower.get(k + 1), upper.get(k + 1), upper.get(k))
-                else {
-                    continue;
-                };
-                self.cell([a, b, c, d], at(k), &|x, y| place(k, x, y), sink, stats)?;
-            }
-        }
-        Ok(())
+        self.classify(lower, lo);
+        self.classify(upper, up);
+        and_along(m, lo, up);
+        each_busy(m, samples.saturating_sub(1), |k| {
+            let (Some(&a), Some(&b), Some(&c), Some(&d)) =
+                (lower.get(k), lower.get(k + 1), upper.get(k + 1), upper.get(k))
+            else {
+                return Ok(());
+            };
+            self.cell([a, b, c, d], at(k), &|x, y| place(k, x, y), sink, stats)
+        })
     }
 
-    /// Contour the cells of a block: cell `k` has corners `ll[k], lr[k],
-    /// ur[k], ul[k]`, sits at `at(k)` in its grid, and its points are placed
-    /// by `place(k, x, y)`.
+    /// Contour one cell that the classes did not skip.
     #[inline(always)]
-    pub(crate) fn run<P, S: CommandSink<P>>(
-        &self,
-        [ll, lr, ur, ul]: [&[f32]; 4],
-        busy: &mut [u8; BLOCK],
-        at: impl Fn(usize) -> Placement,
-        place: impl Fn(usize, f32, f32) -> P,
-        sink: &mut S,
-        stats: &mut ContourStats,
-    ) -> Result<(), S::Error> {
-        let n = ll.len().min(lr.len()).min(ur.len()).min(ul.len()).min(BLOCK);
-        mark(busy, [ll, lr, ur, ul], self.klo, self.khi);
-        let busy = busy.get(..n).unwrap_or(&[]);
-        for (g, group) in busy.chunks(16).enumerate() {
-            if group.iter().fold(0, |m, &x| m | x) == 0 {
-                continue;
-            }
-            for (k, &b) in group.iter().enumerate() {
-                if b == 0 {
-                    continue;
-                }
-                let k = g * 16 + k;
-                let (Some(&a), Some(&b), Some(&c), Some(&d)) = (ll.get(k), lr.get(k), ur.get(k), ul.get(k))
-                else {
-                    continue;
-                };
-                self.cell([a, b, c, d], at(k), &|x, y| place(k, x, y), sink, stats)?;
-            }
-        }
-        Ok(())
-    }
-
-    /// Contour one cell that the marking did not skip.
-    #[inline(always)]
-    fn cell<P, S: CommandSink<P>>(
+    pub(crate) fn cell<P, S: CommandSink<P>>(
         &self,
         [a, b, c, d]: [f32; 4],
         at: Placement,
@@ -314,7 +279,7 @@ mod tests {
     type Placed = (usize, f32, f32);
 
     #[test]
-    fn between_mask_is_the_unsigned_compare() {
+    fn between_is_the_signed_compare() {
         let edges = [i32::MIN, i32::MIN + 1, -2, -1, 0, 1, 2, 0x7F80_0000, i32::MAX - 1, i32::MAX];
         for &lo in &edges {
             for &hi in &edges {
@@ -324,7 +289,7 @@ mod tests {
                 let b = Between::new(lo, hi);
                 for &k in &edges {
                     let want = lo < k && k < hi;
-                    assert_eq!(b.mask(k), if want { u32::MAX } else { 0 }, "lo, hi, k = {:?}", (lo, hi, k));
+                    assert_eq!(b.contains(k), want, "lo, hi, k = {:?}", (lo, hi, k));
                 }
             }
         }
@@ -332,10 +297,10 @@ mod tests {
 
     proptest! {
         #[test]
-        fn between_mask_is_the_unsigned_compare_anywhere(lo in any::<i32>(), hi in any::<i32>(), k in any::<i32>()) {
+        fn between_is_the_signed_compare_anywhere(lo in any::<i32>(), hi in any::<i32>(), k in any::<i32>()) {
             prop_assume!(lo < hi);
             let b = Between::new(lo, hi);
-            prop_assert_eq!(b.mask(k), if lo < k && k < hi { u32::MAX } else { 0 });
+            prop_assert_eq!(b.contains(k), lo < k && k < hi);
         }
     }
 
@@ -365,7 +330,7 @@ mod tests {
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(400))]
         #[test]
-        fn rows_find_the_cells_four_lanes_find(
+        fn rows_skip_exactly_the_cells_no_level_meets(
             lower in prop::collection::vec(sample(), 0..=BLOCK + 1),
             upper in prop::collection::vec(sample(), 0..=BLOCK + 1),
             levels in prop::collection::vec(prop::sample::select(vec![0.0f32, -0.0, 0.5, 1.0, -1.0, 2.5]), 1..3),
@@ -373,27 +338,35 @@ mod tests {
             let sweep = Sweep::new(&levels, Traversal::Corrected);
             let place = |k: usize, x: f32, y: f32| (k, x, y);
             let at = |k: usize| Placement::new(k, 7);
-            let (mut rows, mut lanes) = (Record(Vec::new()), Record(Vec::new()));
-            let (mut rows_stats, mut lanes_stats) = (ContourStats::default(), ContourStats::default());
-            let _ = sweep.run_rows(&lower, &upper, at, place, &mut rows, &mut rows_stats);
+            let (mut rows, mut every) = (Record(Vec::new()), Record(Vec::new()));
+            let (mut rows_stats, mut every_stats) = (ContourStats::default(), ContourStats::default());
+            let mut scratch = [[0u8; BLOCK + 9]; 3];
+            let [c0, c1, c2] = &mut scratch;
+            let _ = sweep.run_rows(&lower, &upper, [c0, c1, c2], at, place, &mut rows, &mut rows_stats);
+            // The reference: every cell, none skipped.
             let n = lower.len().min(upper.len()).min(BLOCK + 1);
             let (r0, r1) = (&lower[..n], &upper[..n]);
-            let (l0, l1) = (r0.get(1..).unwrap_or(&[]), r1.get(1..).unwrap_or(&[]));
-            let mut busy = [0u8; BLOCK];
-            let _ = sweep.run([r0, l0, l1, r1], &mut busy, at, place, &mut lanes, &mut lanes_stats);
+            for k in 0..n.saturating_sub(1) {
+                let _ = sweep.cell([r0[k], r0[k + 1], r1[k + 1], r1[k]], at(k), &|x, y| place(k, x, y), &mut every, &mut every_stats);
+            }
             let bits = |r: &Record| r.0.iter().map(|(l, c)| (*l, c.map(|(k, x, y)| (k, x.to_bits(), y.to_bits())))).collect::<Vec<_>>();
-            prop_assert_eq!(bits(&rows), bits(&lanes));
-            prop_assert_eq!(rows_stats, lanes_stats);
+            prop_assert_eq!(bits(&rows), bits(&every));
+            prop_assert_eq!(rows_stats.crossing_cells, every_stats.crossing_cells);
+            prop_assert_eq!(rows_stats.commands, every_stats.commands);
             // And exactly the quiet cells are found quiet (a busy cell
             // taken for quiet is lost; the converse only costs time).
-            let cells = n.saturating_sub(1);
             let (klo, khi) = levels.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &l| (a.min(l), b.max(l)));
-            let [above, below] = all_four(r0, r1, sweep.above, sweep.below);
-            for k in 0..cells {
+            let [lo, up, m] = &mut scratch;
+            sweep.classify(r0, lo);
+            sweep.classify(r1, up);
+            and_along(m, lo, up);
+            let mut busy = vec![];
+            let _ = each_busy::<()>(m, n.saturating_sub(1), |k| { busy.push(k); Ok(()) });
+            for k in 0..n.saturating_sub(1) {
                 let corners = [r0[k], r0[k + 1], r1[k + 1], r1[k]];
                 let all = |f: &dyn Fn(f32) -> bool| corners.iter().all(|&v| v.is_finite() && f(v));
-                prop_assert_eq!(above[k / 32] >> (k % 32) & 1 == 1, all(&|v| v > khi), "cell {} above", k);
-                prop_assert_eq!(below[k / 32] >> (k % 32) & 1 == 1, all(&|v| v < klo), "cell {} below", k);
+                let quiet = all(&|v| v > khi) || all(&|v| v < klo);
+                prop_assert_eq!(busy.contains(&k), !quiet, "cell {}", k);
             }
         }
     }
