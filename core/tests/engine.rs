@@ -1497,6 +1497,35 @@ fn a_frame_too_long_for_the_memory_plays_live_every_time() {
 }
 
 #[test]
+fn hydrogen_32_orders_alike_in_the_scratch_a_recording_would_leave() {
+    // The board's picture: pieces in the back and spilled into the slice
+    // memory, stitched beside the spill, ordered in all 65,536 bytes of the
+    // slice memory (u32 words).
+    let v = hydrogen32();
+    let mut board = Box::new(Firmware::new());
+    let mut a = Engine::new(EngineConfig::default(), board.buffers()).unwrap();
+    a.feed(&Host::new().volume(&v), 0);
+    assert!(a.update(0));
+    let picture = |e: &Engine<'_>| e.surface().expect("a picture").commands().collect::<Vec<_>>();
+    let sa = a.chain_stats();
+    assert!(sa.ordered, "{sa:?}");
+    assert_eq!((sa.points_out, sa.polylines), (7672, 4), "{sa:?}");
+    // The slice memory less the old picture's 34,664-byte recording, or
+    // less a 36,864-byte tail kept for one, and a back that holds every
+    // piece (no spill). Stitched alike, then ordered in what is left: too
+    // little for u32 words (33,300 bytes at least for the 7,672 points in
+    // 103 polylines), so in u16 words.
+    for slices in [65_536 - 34_664, 65_536 - 36_864] {
+        let mut tail = Mem::sized(slices, 128, [8192, 16384], 0);
+        let mut b = Engine::new(EngineConfig::default(), tail.buffers()).unwrap();
+        b.feed(&Host::new().volume(&v), 0);
+        assert!(b.update(0));
+        assert_eq!(sa, b.chain_stats(), "{slices} bytes");
+        assert!(picture(&a) == picture(&b), "{slices} bytes: the same picture, bit for bit");
+    }
+}
+
+#[test]
 fn the_firmware_memory_keeps_hydrogen_32() {
     let v = hydrogen32();
     let mut mem = Box::new(Firmware::new());

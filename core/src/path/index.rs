@@ -8,26 +8,39 @@ use crate::fastmath::sqrt;
 
 /// No entry.
 pub(super) const NONE: u32 = u32::MAX;
-/// The top bit of a fragment's start: drawn already.
+/// The top bit of a fragment's start: drawn already (the top bit of a
+/// `u16` word in [`Words::Narrow`]).
 pub(super) const DRAWN: u32 = 1 << 31;
-/// Words a step of the order pass's tour takes (`order::Tour`).
-pub(super) const TOUR_WORDS: usize = 3;
 /// Rings of cells searched around the beam.
 pub(super) const RINGS: i32 = 8;
 
 /// The index's words over a byte buffer (the scratch is lent as bytes):
-/// `u32`s, or, where those would not fit, `u16`s ([`Words::narrow`]: for
-/// the stitch pass, whose words are all point or end indices or [`NONE`],
-/// when there are fewer than [`NARROW_LIMIT`] of each). One bounds check
+/// `u32`s, or, where those would not fit, `u16`s ([`Words::narrow`]: the
+/// words are point, end, fragment or tour indices or [`NONE`], so either
+/// pass may narrow them when there are fewer than [`NARROW_LIMIT`] of
+/// each). Besides indices, the order pass keeps bits (a point's drawn
+/// bit, [`Words::bits`] a word) and `f32`s (the tour's jumps,
+/// [`Words::get32`]: one wide word or two narrow ones). One bounds check
 /// and one load a word.
 pub(super) enum Words<'s> {
     Wide(&'s mut [[u8; 4]]),
     Narrow(&'s mut [[u8; 2]]),
 }
 
-/// Points (and ends) below which the stitch pass may keep its index in
-/// `u16`s: the top bit is [`DRAWN`], all ones [`NONE`].
+/// Points (and ends) below which a pass may keep its index in `u16`s: the
+/// top bit is [`DRAWN`], all ones [`NONE`].
 pub(super) const NARROW_LIMIT: usize = 0x7FFF;
+
+/// Which words [`Index::build`] takes: `u16`s where they fit and the
+/// scratch is short for `u32`s (what the passes use), or (for the tests
+/// that both order alike) one or the other.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(not(test), expect(dead_code, reason = "only the tests force a width"))]
+pub(super) enum Width {
+    Fit,
+    Wide,
+    Narrow,
+}
 
 /// Bytes of scratch the stitch pass wants for `frags` fragments of
 /// `points` points in all: its index in `u16` words where those fit (fewer
@@ -38,6 +51,20 @@ pub(super) const NARROW_LIMIT: usize = 0x7FFF;
 pub(crate) const fn stitch_reserve(frags: usize, points: usize) -> usize {
     let word = if points < NARROW_LIMIT && 2 * frags < NARROW_LIMIT { 2 } else { 4 };
     word * (3 * frags + frags / 2 + 1)
+}
+
+/// Bytes of scratch the order pass wants for `frags` polylines of
+/// `points` points in all: its index in `u16` words where those fit (fewer
+/// than [`NARROW_LIMIT`] points), a start and a tour step a polyline (four
+/// words narrow, three wide: an `f32` jump is two `u16`s), a link and a
+/// drawn bit a point, and a cell of the grid for every four points. With
+/// less it still orders (a coarser grid: the nearest ends are searched
+/// among more) down to one cell, and below that copies the polylines
+/// unordered.
+#[cfg_attr(not(test), expect(dead_code, reason = "for the engine's fixed tail, the step after this"))]
+pub(crate) const fn order_reserve(frags: usize, points: usize) -> usize {
+    let (word, bits, step) = if points < NARROW_LIMIT { (2, 16, 4) } else { (4, 32, 3) };
+    word * ((1 + step) * frags + points + points.div_ceil(bits) + points / 4 + 1)
 }
 
 impl<'s> Words<'s> {
@@ -58,13 +85,116 @@ impl<'s> Words<'s> {
         }
     }
 
+    /// Bits a word: 32 or 16.
+    #[inline]
+    pub(super) fn bits(&self) -> usize {
+        match self {
+            Self::Wide(_) => 32,
+            Self::Narrow(_) => 16,
+        }
+    }
+
+    /// Words a step of the order pass's tour takes (`order::Tour`): its
+    /// entry, its exit and the `f32` jump to the next ([`Words::get32`]).
+    #[inline]
+    pub(super) fn tour_step(&self) -> usize {
+        match self {
+            Self::Wide(_) => 3,
+            Self::Narrow(_) => 4,
+        }
+    }
+
+    /// Bit `b` of the bits kept from word `at` on (a word's own
+    /// [`Words::bits`], its raw value: no [`NONE`] or [`DRAWN`]).
+    #[inline]
+    pub(super) fn bit(&self, at: usize, b: usize) -> bool {
+        match self {
+            Self::Wide(w) => w.get(at + b / 32).is_some_and(|v| u32::from_le_bytes(*v) >> (b % 32) & 1 != 0),
+            Self::Narrow(w) => {
+                w.get(at + b / 16).is_some_and(|v| u16::from_le_bytes(*v) >> (b % 16) & 1 != 0)
+            }
+        }
+    }
+
+    /// Set bits `from..to` of the bits kept from word `at` on, a word at
+    /// a time.
+    pub(super) fn set_bits(&mut self, at: usize, from: usize, to: usize) {
+        let bits = self.bits();
+        let mut s = from;
+        while s < to {
+            let bit = s % bits;
+            let n = (bits - bit).min(to - s);
+            let mask = if n == 32 { u32::MAX } else { ((1u32 << n) - 1) << bit };
+            let i = at + s / bits;
+            match self {
+                Self::Wide(w) => {
+                    if let Some(b) = w.get_mut(i) {
+                        *b = (u32::from_le_bytes(*b) | mask).to_le_bytes();
+                    }
+                }
+                Self::Narrow(w) => {
+                    if let Some(b) = w.get_mut(i) {
+                        *b = (u16::from_le_bytes(*b) | mask as u16).to_le_bytes();
+                    }
+                }
+            }
+            s += n;
+        }
+    }
+
+    /// Clear `n` bits from word `at` on (whole words).
+    pub(super) fn clear_bits(&mut self, at: usize, n: usize) {
+        let words = n.div_ceil(self.bits());
+        match self {
+            Self::Wide(w) => w.iter_mut().skip(at).take(words).for_each(|b| *b = [0; 4]),
+            Self::Narrow(w) => w.iter_mut().skip(at).take(words).for_each(|b| *b = [0; 2]),
+        }
+    }
+
+    /// Words that `n` bits take.
+    #[inline]
+    pub(super) fn words_for_bits(&self, n: usize) -> usize {
+        n.div_ceil(self.bits())
+    }
+
+    /// The 32 bits at word `at`: that word, or it (low half) and the next.
+    #[inline]
+    pub(super) fn get32(&self, at: usize) -> u32 {
+        match self {
+            Self::Wide(w) => w.get(at).map_or(0, |b| u32::from_le_bytes(*b)),
+            Self::Narrow(w) => {
+                let half = |i: usize| w.get(i).map_or(0, |b| u32::from(u16::from_le_bytes(*b)));
+                half(at) | half(at + 1) << 16
+            }
+        }
+    }
+
+    /// Set the 32 bits at word `at` ([`Words::get32`]).
+    #[inline]
+    pub(super) fn set32(&mut self, at: usize, v: u32) {
+        match self {
+            Self::Wide(w) => {
+                if let Some(b) = w.get_mut(at) {
+                    *b = v.to_le_bytes();
+                }
+            }
+            Self::Narrow(w) => {
+                for (i, half) in [(at, v as u16), (at + 1, (v >> 16) as u16)] {
+                    if let Some(b) = w.get_mut(i) {
+                        *b = half.to_le_bytes();
+                    }
+                }
+            }
+        }
+    }
+
     #[inline]
     pub(super) fn get(&self, i: usize) -> u32 {
         match self {
             Self::Wide(w) => w.get(i).map_or(NONE, |b| u32::from_le_bytes(*b)),
             Self::Narrow(w) => match w.get(i).map(|b| u16::from_le_bytes(*b)) {
                 None | Some(0xFFFF) => NONE,
-                Some(v) => u32::from(v & 0x7FFF) | if v & 0x8000 != 0 { DRAWN } else { 0 },
+                Some(v) => u32::from(v & 0x7FFF) | u32::from(v & 0x8000) << 16,
             },
         }
     }
@@ -191,6 +321,7 @@ impl<'s, 'g> Index<'s, 'g> {
         scratch: &'s mut [u8],
         any_vertex: bool,
         hashed: bool,
+        width: Width,
     ) -> Option<Self> {
         let points = src.len();
         let mut frags = 0usize;
@@ -204,14 +335,26 @@ impl<'s, 'g> Index<'s, 'g> {
                 }
             }
         }
-        // Words of `u32`, unless the stitch pass's index has less than a
-        // word of lists an end that way and more in `u16`s.
+        // Words of `u32`, unless `u16`s fit and the scratch is short: the
+        // stitch pass's index then has less than a word of lists an end;
+        // the order pass's no room for a single cell beside its starts,
+        // links, tour (three words a step) and drawn bits. (Its picture
+        // depends on its grid, the nearest end searched within rings of
+        // cells, ties in the lists' order: so one that it orders in `u32`s
+        // stays the same. In `u16`s the grid is as fine as that room
+        // allows.)
         let ends = if any_vertex { points } else { 2 * frags };
         // A link a slot: a point, or an end.
         let slots = ends;
         let fixed = frags + slots;
-        let narrow =
-            !any_vertex && points < NARROW_LIMIT && slots < NARROW_LIMIT && scratch.len() / 4 < fixed + ends;
+        let wide_need = if any_vertex { fixed + 3 * frags + points.div_ceil(32) + 1 } else { fixed + ends };
+        let fits = points < NARROW_LIMIT && slots < NARROW_LIMIT;
+        let narrow = match width {
+            Width::Fit => fits && scratch.len() / 4 < wide_need,
+            Width::Wide => false,
+            Width::Narrow if fits => true,
+            Width::Narrow => return None,
+        };
         let mut w = if narrow { Words::narrow(scratch) } else { Words::wide(scratch) };
         let words = w.len();
         if frags == 0 || points >= DRAWN as usize || words < fixed + 1 {
@@ -222,10 +365,10 @@ impl<'s, 'g> Index<'s, 'g> {
         // lists in those stay short) that the scratch holds beside the
         // fragments, the links and the tour: two ends a fragment, or every
         // point of the loops.
-        let tour = if any_vertex { TOUR_WORDS * frags } else { 0 };
-        // The order pass's drawn points, a bit each in (wide) words after
-        // the tour.
-        let dead_words = if any_vertex { points.div_ceil(32) } else { 0 };
+        let tour = if any_vertex { w.tour_step() * frags } else { 0 };
+        // The order pass's drawn points, a bit each in words after the
+        // tour.
+        let dead_words = if any_vertex { w.words_for_bits(points) } else { 0 };
         let spare = words.saturating_sub(fixed + tour + dead_words) as u64;
         let budget = spare.min((ends as u64 * 2).max(1)).max(1);
         let cells_at = |b: u32| -> u64 { top.iter().map(|&t| u64::from((u32::from(t) >> b) + 1)).product() };
@@ -238,15 +381,13 @@ impl<'s, 'g> Index<'s, 'g> {
         let buckets = if hashed { budget as usize } else { 0 };
         let cells = if hashed { buckets } else { n.iter().map(|&c| c as usize).product::<usize>() };
         let links = heads + cells;
-        // The order pass keeps its tour ([`TOUR_WORDS`] a fragment) after
-        // the links.
+        // The order pass keeps its tour ([`Words::tour_step`] a fragment)
+        // after the links.
         if links + slots + tour + dead_words > words {
             return None;
         }
         let dead = links + slots + tour;
-        for d in dead..dead + dead_words {
-            w.set(d, 0);
-        }
+        w.clear_bits(dead, if any_vertex { points } else { 0 });
         let mut k = 0;
         src.for_each_kind(|i, kind| {
             if kind.starts() || i == 0 {
@@ -413,7 +554,12 @@ impl<'s, 'g> Index<'s, 'g> {
     /// The order pass: whether point `s`'s fragment is drawn.
     #[inline]
     pub(super) fn dead(&self, s: usize) -> bool {
-        self.w.get(self.dead + s / 32) >> (s % 32) & 1 != 0
+        self.w.bit(self.dead, s)
+    }
+
+    /// The order pass: the first word past the drawn bits.
+    pub(super) fn past_dead(&self) -> usize {
+        self.dead + self.w.words_for_bits(self.src.len())
     }
 
     /// The order pass: take the drawn ends out of cell `c`'s list (each is
@@ -438,16 +584,7 @@ impl<'s, 'g> Index<'s, 'g> {
 
     /// The order pass: mark points `from..to` drawn, a word at a time.
     pub(super) fn kill(&mut self, from: usize, to: usize) {
-        let mut s = from;
-        while s < to {
-            let bit = s % 32;
-            let n = (32 - bit).min(to - s);
-            let mask = if n == 32 { u32::MAX } else { ((1u32 << n) - 1) << bit };
-            let at = self.dead + s / 32;
-            let v = self.w.get(at);
-            self.w.set(at, v | mask);
-            s += n;
-        }
+        self.w.set_bits(self.dead, from, to);
     }
 
     /// The order pass: no point drawn, and the ends (every vertex of a
@@ -461,7 +598,7 @@ impl<'s, 'g> Index<'s, 'g> {
         // holds more than the grid's (up to two a point: short lists), else
         // the grid's heads serve as as many.
         let grid: usize = self.n.iter().map(|&n| n as usize).product();
-        let free = self.dead + self.src.len().div_ceil(32);
+        let free = self.past_dead();
         let spare = self.w.len().saturating_sub(free);
         (self.heads, self.buckets) = match hashed {
             true if spare > grid => (free, spare.min(2 * self.src.len())),
@@ -471,9 +608,7 @@ impl<'s, 'g> Index<'s, 'g> {
         for c in 0..self.cells() {
             self.w.set(self.heads + c, NONE);
         }
-        for d in self.dead..self.dead + self.src.len().div_ceil(32) {
-            self.w.set(d, 0);
-        }
+        self.w.clear_bits(self.dead, self.src.len());
         for f in 0..self.frags {
             // The splices look up loops alone; the tour's searches the
             // polylines not marked drawn ([`mark_spliced`]).

@@ -37,10 +37,15 @@
 //! Memory, in caller scratch (the engine lends the slice buffers, idle
 //! between volumes): the fragment starts and a grid of ends (a singly
 //! linked list per cell: in the order pass one link a point and a bit a
-//! point for the drawn ones, about 6.7 bytes a point; in the stitch pass
-//! two a fragment, about 5 bytes a point of 3.4-point pieces), all `u32`;
-//! the stitch pass, when that is more than the scratch, keeps them in
-//! `u16`s (surfaces under 32,767 points), half that. Drawn ends stay in
+//! point for the drawn ones, about 6.7 bytes a point, and a tour step a
+//! polyline; in the stitch pass two a fragment, about 5 bytes a point of
+//! 3.4-point pieces), all `u32`; in `u16`s (surfaces under 32,767 points),
+//! about half that, where the scratch is short: for the stitch pass when
+//! it holds less than a list an end in `u32`s, for the order pass when it
+//! holds no grid at all in `u32`s (its picture depends on its grid: one it
+//! orders in `u32`s stays the same). The order pass's tour steps then take
+//! four `u16`s, not three `u32`s (a jump's `f32` is two of them). Either
+//! width orders alike where the grid comes out the same. Drawn ends stay in
 //! their lists and are passed over (the order pass takes them out of a
 //! list as it searches it), so drawing a fragment costs no list walks.
 //! Time: `O(n)` to build, and per fragment a search of the cells within
@@ -56,8 +61,8 @@ pub mod store;
 mod tests;
 pub mod thin;
 
-use index::Index;
 pub(crate) use index::stitch_reserve;
+use index::{Index, Width};
 use merge::{Out, Walk};
 pub(crate) use order::Metric;
 pub use store::{Commands, Geometry, Kind, Packed};
@@ -119,11 +124,14 @@ pub(crate) fn chain(
     tolerance: f32,
     pass: Pass,
 ) -> ChainStats {
-    chain_on(src, dst, scratch, start, tolerance, pass, pass == Pass::Stitch)
+    chain_on(src, dst, scratch, start, tolerance, pass, pass == Pass::Stitch, Width::Fit)
 }
 
 /// [`chain`], with the stitch pass's ends in hashed buckets or (`hashed`
-/// false, for the test that both stitch alike) in the grid of cells.
+/// false, for the test that both stitch alike) in the grid of cells, and
+/// the index in the words `width` says (for the tests that both widths
+/// chain alike).
+#[expect(clippy::too_many_arguments, reason = "the tests' two knobs beside chain's own")]
 fn chain_on(
     src: Source<'_>,
     dst: &mut Geometry<'_>,
@@ -132,10 +140,12 @@ fn chain_on(
     tolerance: f32,
     pass: Pass,
     hashed: bool,
+    width: Width,
 ) -> ChainStats {
     dst.reset(src.shift());
     let mut stats = ChainStats { points_in: src.len() as u32, ..ChainStats::default() };
-    let Some(mut x) = Index::build(src, scratch, pass != Pass::Stitch, hashed && pass == Pass::Stitch) else {
+    let any_vertex = pass != Pass::Stitch;
+    let Some(mut x) = Index::build(src, scratch, any_vertex, hashed && pass == Pass::Stitch, width) else {
         copy(src, dst, &mut stats);
         return stats;
     };

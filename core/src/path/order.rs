@@ -3,7 +3,7 @@
 //! [`Metric`], among screen neighbours where the view is still) and drawn.
 
 use super::ChainStats;
-use super::index::{DRAWN, Index, NONE, TOUR_WORDS, Words, dist2f, length};
+use super::index::{DRAWN, Index, NONE, Words, dist2f, length};
 use super::merge::Walk;
 use super::store::{Geometry, Packed};
 use crate::command::Point3;
@@ -135,10 +135,11 @@ impl Metric {
     }
 }
 
-/// The order pass's tour, in [`TOUR_WORDS`] words a step after the index's
-/// links: the point a fragment is entered at, the point it is left at (the
-/// same for a loop or a dot) and the length of the jump to the next step
-/// (an `f32`'s bits, kept by [`Tour::two_opt`]).
+/// The order pass's tour, in [`Words::tour_step`] words a step after the
+/// index's links: the point a fragment is entered at, the point it is left
+/// at (the same for a loop or a dot) and the length of the jump to the next
+/// step (an `f32`'s bits, one wide word or two narrow ones, kept by
+/// [`Tour::two_opt`]).
 pub(super) struct Tour {
     pub(super) base: usize,
     pub(super) len: usize,
@@ -160,22 +161,22 @@ impl Tour {
 
     /// Step `k`'s entry and exit point indices.
     pub(super) fn get(&self, w: &Words<'_>, k: usize) -> (usize, usize) {
-        let at = self.base + TOUR_WORDS * k;
+        let at = self.base + w.tour_step() * k;
         (w.get(at) as usize, w.get(at + 1) as usize)
     }
 
     pub(super) fn set(&self, w: &mut Words<'_>, k: usize, entry: usize, exit: usize) {
-        let at = self.base + TOUR_WORDS * k;
+        let at = self.base + w.tour_step() * k;
         w.set(at, entry as u32);
         w.set(at + 1, exit as u32);
     }
 
     pub(super) fn jump(&self, w: &Words<'_>, k: usize) -> f32 {
-        f32::from_bits(w.get(self.base + TOUR_WORDS * k + 2))
+        f32::from_bits(w.get32(self.base + w.tour_step() * k + 2))
     }
 
     pub(super) fn set_jump(&self, w: &mut Words<'_>, k: usize, v: f32) {
-        w.set(self.base + TOUR_WORDS * k + 2, v.to_bits());
+        w.set32(self.base + w.tour_step() * k + 2, v.to_bits());
     }
 
     /// Where step `k` is entered and left.
@@ -720,7 +721,7 @@ impl Near {
         // The positions and the heads: in the grid's heads, or else in the
         // words past the drawn bits.
         let grid: usize = x.n.iter().map(|&c| c as usize).product();
-        let free = x.dead + x.src.len().div_ceil(32);
+        let free = x.past_dead();
         let spare = x.w.len().saturating_sub(free);
         let (pos, room) = if grid >= spare {
             (x.frags, grid.checked_sub(x.frags + 16)? + 16)

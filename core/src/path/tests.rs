@@ -151,7 +151,7 @@ proptest::proptest! {
             }
         }
         let mut scratch = vec![0u8; 16 * points + 4096];
-        let mut x = Index::build(Source::one(&src), &mut scratch, false, true).expect("room");
+        let mut x = Index::build(Source::one(&src), &mut scratch, false, true, Width::Fit).expect("room");
         for f in (0..lens.len()).step_by(3) {
             x.take(f);
         }
@@ -190,7 +190,7 @@ proptest::proptest! {
             let mut tours = Vec::new();
             for afresh in [false, true] {
                 let mut scratch = vec![0u8; 64 * 1024];
-                let mut x = Index::build(Source::one(&src), &mut scratch, true, false).expect("room");
+                let mut x = Index::build(Source::one(&src), &mut scratch, true, false, Width::Fit).expect("room");
                 let mut tour = Tour { base: x.tour_base(), len: 0, metric };
                 for f in 0..x.frags {
                     let end = x.span(f).0;
@@ -240,7 +240,7 @@ proptest::proptest! {
             let mut tours = Vec::new();
             for afresh in [false, true] {
                 let mut scratch = vec![0u8; 64 * 1024];
-                let mut x = Index::build(Source::one(&src), &mut scratch, true, false).expect("room");
+                let mut x = Index::build(Source::one(&src), &mut scratch, true, false, Width::Fit).expect("room");
                 let mut tour = Tour { base: x.tour_base(), len: 0, metric };
                 for (f, (_, at)) in loops.iter().enumerate() {
                     let (from, to) = x.span(f);
@@ -275,7 +275,7 @@ proptest::proptest! {
         // The starts, two links a fragment, a list for every other end.
         let tight = 2 * (frags + 2 * frags + frags);
         proptest::prop_assert!(matches!(
-            Index::build(Source::one(&src), &mut vec![0u8; tight], false, true).map(|x| x.w),
+            Index::build(Source::one(&src), &mut vec![0u8; tight], false, true, Width::Fit).map(|x| x.w),
             Some(Words::Narrow(_))
         ));
         let mut out = Vec::new();
@@ -283,7 +283,7 @@ proptest::proptest! {
             let mut p2 = store(512);
             let mut dst = Geometry::new(&mut p2);
             let mut scratch = vec![0u8; bytes];
-            let st = chain_on(Source::one(&src), &mut dst, &mut scratch, [0; 3], 0.0, Pass::Stitch, hashed);
+            let st = chain_on(Source::one(&src), &mut dst, &mut scratch, [0; 3], 0.0, Pass::Stitch, hashed, Width::Fit);
             proptest::prop_assert!(st.ordered);
             out.push((dst.commands().collect::<Vec<_>>(), st.polylines, st.culled_dots, st.duplicate_segments));
         }
@@ -444,7 +444,7 @@ proptest::proptest! {
         push_fragments(&mut src, &frags);
         for metric in metrics() {
             let mut scratch = vec![0u8; 64 * 1024];
-            let mut x = Index::build(Source::one(&src), &mut scratch, true, false).expect("room");
+            let mut x = Index::build(Source::one(&src), &mut scratch, true, false, Width::Fit).expect("room");
             x.relink(false);
             let mut tour = Tour { base: x.tour_base(), len: 0, metric };
             for f in 0..x.frags {
@@ -642,4 +642,100 @@ fn too_little_scratch_copies_in_order() {
     let a: Vec<_> = src.commands().collect();
     let b: Vec<_> = dst.commands().collect();
     assert_eq!(a, b);
+}
+
+/// Words of the order pass's index besides its grid and its buckets, at
+/// `width`: the starts, a link a point, the tour, the drawn bits.
+fn order_overhead(frags: usize, points: usize, width: Width) -> usize {
+    let (step, bits) = if width == Width::Narrow { (4, 16) } else { (3, 32) };
+    frags + points + step * frags + points.div_ceil(bits)
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(300))]
+    #[test]
+    fn the_order_pass_orders_alike_in_u16_and_u32_words(
+        frags in proptest::collection::vec(
+            (proptest::collection::vec([0u16..40, 0u16..40, 0u16..6], 1..7), 0u8..3),
+            1..40,
+        ),
+        start in [0u16..40, 0u16..40, 0u16..6],
+        spare in 1usize..600,
+    ) {
+        // Dots, open polylines and loops that touch and cross (splices,
+        // and ties the tour breaks by the order of its lists), ordered in
+        // plenty of room, and in as many words for the grid and the
+        // buckets either way (a tight scratch: a coarse grid, buckets in
+        // the grid's heads). The same picture, stats and all.
+        let mut p = store(256);
+        let mut src = Geometry::new(&mut p);
+        src.reset(0);
+        push_fragments(&mut src, &frags);
+        let (f, n) = ((0..src.len()).filter(|&i| src.kind(i).is_some_and(Kind::starts)).count(), src.len());
+        let room = |width: Width, spare: usize| {
+            let word = if width == Width::Narrow { 2 } else { 4 };
+            word * (order_overhead(f, n, width) + spare)
+        };
+        for metric in metrics() {
+            for spare in [4 * n, spare] {
+                let mut out = Vec::new();
+                for width in [Width::Wide, Width::Narrow] {
+                    let mut p2 = store(512);
+                    let mut dst = Geometry::new(&mut p2);
+                    let mut scratch = vec![0u8; room(width, spare)];
+                    let pass = Pass::Order(metric);
+                    let st = chain_on(Source::one(&src), &mut dst, &mut scratch, start, 0.0, pass, false, width);
+                    proptest::prop_assert!(st.ordered);
+                    out.push((dst.commands().collect::<Vec<_>>(), st));
+                }
+                proptest::prop_assert_eq!(&out[0], &out[1]);
+            }
+        }
+    }
+}
+
+#[test]
+fn the_order_pass_takes_u16_words_only_where_u32_words_leave_no_cell() {
+    // 200 points in 40 loops: u32 words want 4 x (4 x 40 + 200 + 7 + 1)
+    // bytes for a grid of one cell; below that, u16 words. (Above it the
+    // u32 index orders as it always did: the picture depends on the grid.)
+    let mut p = store(256);
+    let mut src = Geometry::new(&mut p);
+    src.reset(0);
+    for l in 0..40u16 {
+        for (k, q) in [[0, 0], [1, 0], [1, 1], [0, 1], [0, 2]].into_iter().enumerate() {
+            src.push_raw([q[0] + 3 * l, q[1], l % 5], if k == 0 { Kind::Loop } else { Kind::Line });
+        }
+    }
+    let wide_least = 4 * (order_overhead(40, 200, Width::Wide) + 1);
+    assert_eq!(wide_least, 4 * (4 * 40 + 200 + 7 + 1));
+    for (bytes, narrow) in [(wide_least, false), (wide_least - 4, true), (order_reserve(40, 200), true)] {
+        let mut scratch = vec![0u8; bytes];
+        let x = Index::build(Source::one(&src), &mut scratch, true, false, Width::Fit).expect("room");
+        assert_eq!(matches!(x.w, Words::Narrow(_)), narrow, "{bytes} bytes");
+    }
+    // The reserve: u16 words, a cell for every four points.
+    assert_eq!(order_reserve(40, 200), 2 * (order_overhead(40, 200, Width::Narrow) + 50 + 1));
+    // Too many points for u16 words: u32, and a narrow index refused.
+    assert_eq!(order_reserve(10, NARROW_LIMIT), 4 * (40 + NARROW_LIMIT + 1024 + NARROW_LIMIT / 4 + 1));
+}
+
+#[test]
+fn drawn_bits_and_jumps_keep_their_bits_in_u16_words() {
+    // The drawn bits past a word's 16 and the jumps' two halves.
+    let mut bytes = [0u8; 64];
+    let mut w = Words::narrow(&mut bytes);
+    w.clear_bits(2, 60);
+    w.set_bits(2, 13, 37);
+    w.set_bits(2, 59, 60);
+    let set: Vec<usize> = (0..64).filter(|&b| w.bit(2, b)).collect();
+    assert_eq!(set, (13..37).chain([59]).collect::<Vec<_>>());
+    assert_eq!(w.get(3), NONE, "all 16 bits of word 3, read as an index");
+    for v in [0.0f32, -1.5e-7, 3.25e9, f32::MAX] {
+        w.set32(20, v.to_bits());
+        assert_eq!(f32::from_bits(w.get32(20)), v);
+    }
+    // The last word's half past the end is dropped, not a panic.
+    w.set32(31, u32::MAX);
+    assert_eq!(w.get32(31), 0xFFFF);
 }
