@@ -134,7 +134,7 @@ pub fn contour_slab<T: Voxel, S: SurfaceSink>(
                 let h1 = if right && up { lane(data, row(y + 1, z + 1) + x0, 1, n, b3) } else { &[] };
                 if xy && right {
                     sweep.classify(l1, c1);
-                    and_along(m, c0, c1);
+                    and_along(m, c0, c1, n - 1);
                     let slice = SliceId { plane: Plane::XY, index: z };
                     each_busy(m, n - 1, |k| {
                         let (Some(&a), Some(&b), Some(&c), Some(&d)) =
@@ -156,7 +156,7 @@ pub fn contour_slab<T: Voxel, S: SurfaceSink>(
                 }
                 if xz && up {
                     sweep.classify(h0, c2);
-                    and_along(m, c0, c2);
+                    and_along(m, c0, c2, n - 1);
                     let slice = SliceId { plane: Plane::XZ, index: y };
                     let fy = y as f32;
                     each_busy(m, n - 1, |k| {
@@ -185,7 +185,7 @@ pub fn contour_slab<T: Voxel, S: SurfaceSink>(
                         sweep.classify(h0, c2);
                     }
                     sweep.classify(h1, c3);
-                    and_across(m, [c0, c1, c2, c3]);
+                    and_across(m, [c0, c1, c2, c3], ys);
                     each_busy(m, ys, |k| {
                         let (Some(&a), Some(&b), Some(&c), Some(&d)) =
                             (l0.get(k), l1.get(k), h1.get(k), h0.get(k))

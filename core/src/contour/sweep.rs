@@ -103,8 +103,10 @@ pub(crate) const ABOVE: u8 = 1;
 /// See [`ABOVE`].
 pub(crate) const BELOW: u8 = 2;
 
-/// Class bytes of up to `BLOCK + 1` samples, and room for a word's worth
-/// of quiet padding past them (so that a scan reads whole words).
+/// Class bytes of up to `BLOCK + 1` samples, rounded up to whole words of
+/// eight (a scan reads whole words and masks the bytes past its end). The
+/// passes touch only the bytes of the row at hand: a board's rows are
+/// short.
 pub(crate) type Classes = [u8; BLOCK + 9];
 
 impl Sweep<'_> {
@@ -113,30 +115,27 @@ impl Sweep<'_> {
     #[inline(always)]
     pub(crate) fn classify(&self, row: &[f32], out: &mut Classes) {
         let (above, below) = (self.above, self.below);
-        out.fill(ABOVE | BELOW);
         for (o, &v) in out.iter_mut().zip(row) {
             let k = key(v);
-            *o = u8::from(above.contains(k)) | (u8::from(below.contains(k)) << 1);
+            *o = (u8::from(above.contains(k)) * ABOVE) | (u8::from(below.contains(k)) * BELOW);
         }
     }
 }
 
-/// `m[k]`: the AND of the classes of samples `k` and `k + 1` of two rows,
-/// the cell between them (the last byte, past the cells, stays quiet).
+/// `m[k]` for the `n` cells between two rows of classes: the AND of the
+/// classes of samples `k` and `k + 1` of both.
 #[inline(always)]
-pub(crate) fn and_along(m: &mut Classes, a: &Classes, b: &Classes) {
-    let (a1, b1) = (a.get(1..).unwrap_or(&[]), b.get(1..).unwrap_or(&[]));
+pub(crate) fn and_along(m: &mut Classes, a: &Classes, b: &Classes, n: usize) {
+    let (a1, b1) = (a.get(1..=n).unwrap_or(&[]), b.get(1..=n).unwrap_or(&[]));
     for ((((o, &a0), &a1), &b0), &b1) in m.iter_mut().zip(a).zip(a1).zip(b).zip(b1) {
         *o = a0 & a1 & b0 & b1;
     }
-    if let Some(last) = m.last_mut() {
-        *last = ABOVE | BELOW;
-    }
 }
 
-/// `m[k]`: the AND of the classes of sample `k` of four rows.
+/// `m[k]` for `n` samples of four rows of classes: the AND of sample `k`'s.
 #[inline(always)]
-pub(crate) fn and_across(m: &mut Classes, [a, b, c, d]: [&Classes; 4]) {
+pub(crate) fn and_across(m: &mut Classes, [a, b, c, d]: [&Classes; 4], n: usize) {
+    let m = m.get_mut(..n).unwrap_or(&mut []);
     for ((((o, &a), &b), &c), &d) in m.iter_mut().zip(a).zip(b).zip(c).zip(d) {
         *o = a & b & c & d;
     }
@@ -228,10 +227,11 @@ impl<'l> Sweep<'l> {
     ) -> Result<(), S::Error> {
         let samples = lower.len().min(upper.len()).min(BLOCK + 1);
         let (lower, upper) = (lower.get(..samples).unwrap_or(&[]), upper.get(..samples).unwrap_or(&[]));
+        let cells = samples.saturating_sub(1);
         self.classify(lower, lo);
         self.classify(upper, up);
-        and_along(m, lo, up);
-        each_busy(m, samples.saturating_sub(1), |k| {
+        and_along(m, lo, up, cells);
+        each_busy(m, cells, |k| {
             let (Some(&a), Some(&b), Some(&c), Some(&d)) =
                 (lower.get(k), lower.get(k + 1), upper.get(k + 1), upper.get(k))
             else {
@@ -359,7 +359,7 @@ mod tests {
             let [lo, up, m] = &mut scratch;
             sweep.classify(r0, lo);
             sweep.classify(r1, up);
-            and_along(m, lo, up);
+            and_along(m, lo, up, n.saturating_sub(1));
             let mut busy = vec![];
             let _ = each_busy::<()>(m, n.saturating_sub(1), |k| { busy.push(k); Ok(()) });
             for k in 0..n.saturating_sub(1) {
