@@ -692,8 +692,8 @@ fn levels_for(given: &[f32], demo: Option<DemoSpec>, suggest: Option<&LoadedVolu
         return Ok(vec![d.demo.default_level()]);
     }
     let Some(vol) = suggest else { bail!("give at least one --level for a volume file") };
-    match isoscope_sim::info::summarize(vol, 64).suggested.first() {
-        Some(&l) => {
+    match isoscope_sim::info::default_level(vol) {
+        Some(l) => {
             eprintln!(
                 "isoscope-sim: note: no --level given; drawing level {l} (Otsu's threshold, see `info`)"
             );
@@ -787,10 +787,7 @@ fn prepare(
     let every = match v.every {
         Some(0) => bail!("--every must be at least 1"),
         Some(n) => n,
-        None if auto_every => {
-            let Dims(nx, ny, nz) = vol.dims;
-            nx.max(ny).max(nz).div_ceil(32).max(1)
-        }
+        None if auto_every => scene::auto_every(vol.dims),
         None => 1,
     };
     if every > 1 && v.every.is_none() {
