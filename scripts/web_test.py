@@ -286,6 +286,30 @@ def main():
                 b.send("Page.navigate", {"url": f"{base}?{query}&size={SIZE}"})
                 b.wait(READY, f"{name} to show")
                 check_scene(b, name, page_frame(b), flags, sim, tmp, f"scene{i}", GOLDEN if i == 0 else None)
+            # The controls: drag on the screen (40 px right, 20 px down: yaw
+            # and pitch +20 and +10 degrees at half a degree a pixel), then
+            # the level slider to 0.2; the page then draws render's scene.
+            b.send("Page.navigate", {"url": f"{base}?demo=hydrogen:32&size={SIZE}"})
+            b.wait(READY, "hydrogen to show")
+            frames = b.eval("window.isoscope.frames")
+            box = b.eval("(() => { const r = document.getElementById('screen').getBoundingClientRect(); "
+                         "return [r.left + r.width / 2, r.top + r.height / 2]; })()")
+            x, y = round(box[0]), round(box[1])
+            mouse = {"button": "left", "buttons": 1, "clickCount": 1}
+            b.send("Input.dispatchMouseEvent", {"type": "mousePressed", "x": x, "y": y, **mouse})
+            for step in range(1, 5):
+                b.send("Input.dispatchMouseEvent", {"type": "mouseMoved", "x": x + 10 * step, "y": y + 5 * step,
+                                                    **mouse})
+            b.send("Input.dispatchMouseEvent", {"type": "mouseReleased", "x": x + 40, "y": y + 20, **mouse})
+            b.eval("(() => { const s = document.getElementById('level'); s.value = '0.2'; "
+                   "s.dispatchEvent(new Event('input')); })()")
+            # A redraw after the slider's event has both changes.
+            b.wait(f"window.isoscope.frames > {frames} && !window.isoscope.pending() && "
+                   "(() => { const v = window.isoscope.view(); return v.yaw === 50 && v.pitch === 30; })()",
+                   "the dragged view and the new level to show", timeout=30)
+            check_scene(b, "hydrogen 32^3 dragged and at level 0.2", page_frame(b),
+                        ["--demo", "hydrogen:32", "--yaw", "50", "--pitch", "30", "--level", "0.2"], sim, tmp,
+                        "dragged")
             if data and (data / FILE_SCENE).exists():
                 path = data / FILE_SCENE
                 b.send("Page.navigate", {"url": f"{base}?size={SIZE}"})

@@ -29,6 +29,8 @@ const api = {
   samples: () => (scope ? scope.samples_text() : ''),
   stats: () => (scope ? JSON.parse(scope.stats()) : null),
   info: () => info,
+  view: () => ({ ...view }),
+  pending: () => dirty,
 };
 window.isoscope = api;
 
