@@ -21,6 +21,8 @@
 //!   pseudo-terminal or TCP port, at a real UART's line rate.
 //! - [`ports`] (not on wasm32): the machine's serial ports, which look like
 //!   a board, and the one `--port auto` picks.
+//! - [`serve`] (not on wasm32): the web app's files over HTTP on a local
+//!   port (`isoscope-sim serve`).
 //! - `tty` (Unix only): the virtual board's pseudo-terminal.
 //! - [`outfile`]: output files written whole or not at all.
 //! - [`relay`]: a noisy line between a sender and a board, for testing
@@ -42,6 +44,8 @@ pub mod ports;
 pub mod progress;
 pub mod relay;
 pub mod scene;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod serve;
 pub mod svg;
 #[cfg(unix)]
 pub mod tty;

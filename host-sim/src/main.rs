@@ -81,6 +81,9 @@ enum Cmd {
     /// ST-LINK's virtual COM port, an FTDI, CP210x, CH340 or Prolific
     /// USB-UART): the one `send --port auto` picks.
     Ports,
+    /// Serve the web app (built by `scripts/web-build` into target/web) on a
+    /// local port, e.g. open http://127.0.0.1:8000/?demo=hydrogen:32.
+    Serve(ServeArgs),
     /// Print a completion script for SHELL to standard output, e.g.
     /// `isoscope-sim completions bash > ~/.local/share/bash-completion/completions/isoscope-sim`.
     Completions(CompletionsArgs),
@@ -95,6 +98,16 @@ struct CompletionsArgs {
     /// The shell to write completions for.
     #[arg(value_enum)]
     shell: clap_complete::Shell,
+}
+
+#[derive(Args, Debug)]
+struct ServeArgs {
+    /// The folder to serve: the built web app.
+    #[arg(long, default_value = "target/web")]
+    dir: PathBuf,
+    /// Address to listen on (127.0.0.1:0 picks a free port).
+    #[arg(long, default_value = "127.0.0.1:8000")]
+    listen: String,
 }
 
 #[derive(Args, Debug)]
@@ -1045,6 +1058,19 @@ fn parse_probability(s: &str) -> Result<f64, String> {
 
 /// A completion script for `args.shell`, generated from the same clap
 /// declarations that parse the command line, so it cannot drift from them.
+fn serve(args: &ServeArgs) -> Result<()> {
+    if !args.dir.join("index.html").is_file() {
+        bail!("{} holds no web app (no index.html): build it with scripts/web-build", args.dir.display());
+    }
+    let listener = std::net::TcpListener::bind(&args.listen)
+        .with_context(|| format!("cannot listen on {}", args.listen))?;
+    let addr = listener.local_addr()?;
+    println!("http://{addr}/?demo=hydrogen:32");
+    eprintln!("isoscope-sim: serving {} at http://{addr}/ (Ctrl-C stops)", args.dir.display());
+    std::io::stdout().flush()?;
+    isoscope_sim::serve::serve(&listener, &args.dir)
+}
+
 fn completions(args: &CompletionsArgs) -> Result<()> {
     let mut script = Vec::new();
     clap_complete::generate(args.shell, &mut Cli::command(), "isoscope-sim", &mut script);
@@ -1145,6 +1171,7 @@ fn main() -> ExitCode {
         Cmd::Ports => {
             isoscope_sim::ports::available().and_then(|p| print_out(&isoscope_sim::ports::listing(&p)))
         }
+        Cmd::Serve(a) => serve(a),
         Cmd::Completions(a) => completions(a),
         Cmd::Manpage(a) => manpage(a),
         Cmd::Info(a) => {
