@@ -2,7 +2,7 @@
 """The web app in a real browser: headless Chromium against target/web.
 
 Called by scripts/web-test (which builds the page and installs Chromium).
-Serves target/web on a local port, drives Chromium over the DevTools
+Serves target/web with `isoscope-sim serve` on a free port, drives Chromium over the DevTools
 protocol on a pipe (--remote-debugging-pipe: no websocket, nothing to
 install beyond the browser), and for each scene checks that
 
@@ -16,15 +16,12 @@ Standard library only. Usage: web_test.py SIM_BINARY [DATA_DIR]
 """
 
 import base64
-import functools
-import http.server
 import json
 import os
 import shutil
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 import zlib
 from pathlib import Path
@@ -69,19 +66,15 @@ def fail(msg):
     sys.exit(1)
 
 
-class Server(http.server.SimpleHTTPRequestHandler):
-    extensions_map = {**http.server.SimpleHTTPRequestHandler.extensions_map, ".wasm": "application/wasm",
-                      ".js": "text/javascript"}
-
-    def log_message(self, *args):
-        pass
-
-
-def serve():
-    handler = functools.partial(Server, directory=str(SITE))
-    httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
-    threading.Thread(target=httpd.serve_forever, daemon=True).start()
-    return httpd
+def serve(sim):
+    """`isoscope-sim serve` on a free port; its process and base address."""
+    proc = subprocess.Popen([sim, "serve", "--dir", str(SITE), "--listen", "127.0.0.1:0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    first = proc.stdout.readline().strip()
+    if not first.startswith("http://"):
+        proc.kill()
+        fail(f"isoscope-sim serve printed {first!r}, not its address")
+    return proc, first.split("?")[0] + "index.html"
 
 
 class Browser:
@@ -275,8 +268,7 @@ def main():
         fail("no chromium on PATH (scripts/web-test installs it)")
     if not (SITE / "index.html").exists():
         fail(f"{SITE} holds no page: run scripts/web-build")
-    httpd = serve()
-    base = f"http://127.0.0.1:{httpd.server_address[1]}/index.html"
+    server, base = serve(sim)
     with tempfile.TemporaryDirectory(prefix="isoscope-web-") as tmpdir:
         tmp = Path(tmpdir)
         b = Browser(exe, tmp / "profile")
@@ -341,7 +333,8 @@ def main():
             print(f"web-test: a broken file shows: {shown}")
         finally:
             b.close()
-            httpd.shutdown()
+            server.kill()
+            server.wait()
     print("web-test: ok")
 
 

@@ -35,6 +35,10 @@ const api = {
 window.isoscope = api;
 
 function message(e) {
+  if (e instanceof WebAssembly.RuntimeError) {
+    // A trap: out of memory (a volume too large for the page) or a bug.
+    return `the page's wasm module stopped (${e.message}): most likely out of memory; reload the page`;
+  }
   return String(e && e.message !== undefined ? e.message : e);
 }
 

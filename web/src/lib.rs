@@ -27,8 +27,9 @@ use std::fmt::Write as _;
 use wasm_bindgen::prelude::*;
 
 /// The largest volume a page loads, in bytes of samples: a wasm32 page has
-/// 4 GiB of address space at most, and the pipeline needs room beside it.
-pub const MAX_VOLUME_BYTES: usize = 512 << 20;
+/// 4 GiB of address space at most, and loading holds the file's bytes, the
+/// volume read and the volume as the board takes it at once.
+pub const MAX_VOLUME_BYTES: usize = 256 << 20;
 
 /// The zoom of `render`'s default margin (5%).
 const DEFAULT_ZOOM: f64 = 0.9;
