@@ -180,7 +180,7 @@ impl<'a> InProcess<'a> {
     ) -> Result<Loaded> {
         let levels = Levels::from_slice(&cfg.levels)
             .with_context(|| format!("at most {MAX_LEVELS} levels go to the board"))?;
-        let t0 = std::time::Instant::now();
+        let t0 = web_time::Instant::now();
         for msg in volume_messages(vol, cfg, levels, self.seq) {
             self.seq = msg_seq(&msg).wrapping_add(1);
             self.feed(&msg)?;
@@ -188,7 +188,7 @@ impl<'a> InProcess<'a> {
                 p.inc();
             }
         }
-        let t1 = std::time::Instant::now();
+        let t1 = web_time::Instant::now();
         self.engine.update(self.now_ms);
         self.loaded.seconds = [(t1 - t0).as_secs_f64(), t1.elapsed().as_secs_f64()];
         self.events()?;

@@ -78,6 +78,17 @@ fn otsu(hist: &[u64], from: usize, lo: f64, hi: f64) -> Option<f32> {
     at.map(|b| (lo + b as f64 * width) as f32)
 }
 
+/// Histogram bins whose first suggested level is the one a volume file is
+/// drawn at when no level is given ([`default_level`]).
+pub const LEVEL_BINS: usize = 64;
+
+/// The level a volume file is drawn at when no level is given: the first
+/// level [`summarize`] suggests over [`LEVEL_BINS`] bins (Otsu's
+/// threshold); `None` for a constant or empty volume.
+pub fn default_level(v: &LoadedVolume) -> Option<f32> {
+    summarize(v, LEVEL_BINS).suggested.first().copied()
+}
+
 /// Summarise a volume with a histogram of `bins` bins.
 pub fn summarize(v: &LoadedVolume, bins: usize) -> Summary {
     let bins = bins.max(2);

@@ -19,8 +19,10 @@
 //!   volume with a send window and retransmission, report the throughput.
 //! - [`device`]: the virtual board: the core's device engine behind a
 //!   pseudo-terminal or TCP port, at a real UART's line rate.
-//! - [`ports`]: the machine's serial ports, which look like a board, and
-//!   the one `--port auto` picks.
+//! - [`ports`] (not on wasm32): the machine's serial ports, which look like
+//!   a board, and the one `--port auto` picks.
+//! - [`serve`] (not on wasm32): the web app's files over HTTP on a local
+//!   port (`isoscope-sim serve`).
 //! - `tty` (Unix only): the virtual board's pseudo-terminal.
 //! - [`outfile`]: output files written whole or not at all.
 //! - [`relay`]: a noisy line between a sender and a board, for testing
@@ -37,10 +39,13 @@ pub mod info;
 pub mod link;
 pub mod outfile;
 pub mod phosphor;
+#[cfg(not(target_arch = "wasm32"))]
 pub mod ports;
 pub mod progress;
 pub mod relay;
 pub mod scene;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod serve;
 pub mod svg;
 #[cfg(unix)]
 pub mod tty;

@@ -681,10 +681,12 @@ where
 
 /// How long a read of a serial port waits for data before it returns (and
 /// the reader looks whether it is to stop).
+#[cfg(not(target_arch = "wasm32"))]
 const READ_TIMEOUT: Duration = Duration::from_millis(100);
 
 /// How long a write may wait for the port to take a byte before the port
 /// is given up on.
+#[cfg(not(target_arch = "wasm32"))]
 const WRITE_STALL: Duration = Duration::from_secs(10);
 
 /// A port to the board: a serial device or pseudo-terminal path, opened at
@@ -693,6 +695,7 @@ const WRITE_STALL: Duration = Duration::from_secs(10);
 ///
 /// # Errors
 /// The port cannot be opened or set up.
+#[cfg(not(target_arch = "wasm32"))]
 pub fn open_port(spec: &str, baud: u32) -> Result<(Box<dyn Read + Send>, Box<dyn Write + Send>)> {
     if let Some(addr) = spec.strip_prefix("tcp:") {
         let s = std::net::TcpStream::connect(addr).with_context(|| format!("cannot connect to {addr}"))?;
@@ -728,10 +731,12 @@ pub fn open_port(spec: &str, baud: u32) -> Result<(Box<dyn Read + Send>, Box<dyn
 /// A serial port's writer that waits for a slow line: a write the port's
 /// read timeout cut short is tried again, up to [`WRITE_STALL`] without
 /// progress.
+#[cfg(not(target_arch = "wasm32"))]
 struct PatientWriter {
     port: Box<dyn serialport::SerialPort>,
 }
 
+#[cfg(not(target_arch = "wasm32"))]
 impl Write for PatientWriter {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
         let t0 = Instant::now();

@@ -81,6 +81,9 @@ enum Cmd {
     /// ST-LINK's virtual COM port, an FTDI, CP210x, CH340 or Prolific
     /// USB-UART): the one `send --port auto` picks.
     Ports,
+    /// Serve the web app (built by `scripts/web-build` into target/web) on a
+    /// local port, e.g. open http://127.0.0.1:8000/?demo=hydrogen:32.
+    Serve(ServeArgs),
     /// Print a completion script for SHELL to standard output, e.g.
     /// `isoscope-sim completions bash > ~/.local/share/bash-completion/completions/isoscope-sim`.
     Completions(CompletionsArgs),
@@ -95,6 +98,16 @@ struct CompletionsArgs {
     /// The shell to write completions for.
     #[arg(value_enum)]
     shell: clap_complete::Shell,
+}
+
+#[derive(Args, Debug)]
+struct ServeArgs {
+    /// The folder to serve: the built web app.
+    #[arg(long, default_value = "target/web")]
+    dir: PathBuf,
+    /// Address to listen on (127.0.0.1:0 picks a free port).
+    #[arg(long, default_value = "127.0.0.1:8000")]
+    listen: String,
 }
 
 #[derive(Args, Debug)]
@@ -695,8 +708,8 @@ fn levels_for(given: &[f32], demo: Option<DemoSpec>, suggest: Option<&LoadedVolu
         return Ok(vec![d.demo.default_level()]);
     }
     let Some(vol) = suggest else { bail!("give at least one --level for a volume file") };
-    match isoscope_sim::info::summarize(vol, 64).suggested.first() {
-        Some(&l) => {
+    match isoscope_sim::info::default_level(vol) {
+        Some(l) => {
             eprintln!(
                 "isoscope-sim: note: no --level given; drawing level {l} (Otsu's threshold, see `info`)"
             );
@@ -790,10 +803,7 @@ fn prepare(
     let every = match v.every {
         Some(0) => bail!("--every must be at least 1"),
         Some(n) => n,
-        None if auto_every => {
-            let Dims(nx, ny, nz) = vol.dims;
-            nx.max(ny).max(nz).div_ceil(32).max(1)
-        }
+        None if auto_every => scene::auto_every(vol.dims),
         None => 1,
     };
     if every > 1 && v.every.is_none() {
@@ -1051,6 +1061,19 @@ fn parse_probability(s: &str) -> Result<f64, String> {
 
 /// A completion script for `args.shell`, generated from the same clap
 /// declarations that parse the command line, so it cannot drift from them.
+fn serve(args: &ServeArgs) -> Result<()> {
+    if !args.dir.join("index.html").is_file() {
+        bail!("{} holds no web app (no index.html): build it with scripts/web-build", args.dir.display());
+    }
+    let listener = std::net::TcpListener::bind(&args.listen)
+        .with_context(|| format!("cannot listen on {}", args.listen))?;
+    let addr = listener.local_addr()?;
+    println!("http://{addr}/?demo=hydrogen:32");
+    eprintln!("isoscope-sim: serving {} at http://{addr}/ (Ctrl-C stops)", args.dir.display());
+    std::io::stdout().flush()?;
+    isoscope_sim::serve::serve(&listener, &args.dir)
+}
+
 fn completions(args: &CompletionsArgs) -> Result<()> {
     let mut script = Vec::new();
     clap_complete::generate(args.shell, &mut Cli::command(), "isoscope-sim", &mut script);
@@ -1151,6 +1174,7 @@ fn main() -> ExitCode {
         Cmd::Ports => {
             isoscope_sim::ports::available().and_then(|p| print_out(&isoscope_sim::ports::listing(&p)))
         }
+        Cmd::Serve(a) => serve(a),
         Cmd::Completions(a) => completions(a),
         Cmd::Manpage(a) => manpage(a),
         Cmd::Info(a) => {

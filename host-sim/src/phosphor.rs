@@ -590,6 +590,17 @@ impl Phosphor {
     /// from the top. Glow, then `t = (1 - exp(-exposure * E))^(1 / gamma)`,
     /// then the palette.
     pub fn to_rgb8(&self) -> Vec<u8> {
+        self.to_pixels::<3>()
+    }
+
+    /// The picture as [`Phosphor::to_rgb8`] gives it, with an opaque alpha
+    /// byte after each pixel's RGB: a canvas's `ImageData`.
+    pub fn to_rgba8(&self) -> Vec<u8> {
+        self.to_pixels::<4>()
+    }
+
+    /// The picture, `N` bytes a pixel: RGB, then 255 for the rest.
+    fn to_pixels<const N: usize>(&self) -> Vec<u8> {
         let glow = self.cfg.glow;
         // The energy seen, glow included.
         let seen = if glow.strength > 0.0 {
@@ -608,9 +619,9 @@ impl Phosphor {
             // `v` is in 0..=1 (NaN only for a NaN energy, which `as` maps to 0).
             .map(|&e| ((1.0 - exp_neg(-exposure * e)) * top + 0.5).clamp(0.0, top) as u32)
             .collect();
-        let mut out = vec![0u8; seen.len() * 3];
-        for (px, &i) in out.chunks_exact_mut(3).zip(&index) {
-            px.copy_from_slice(&self.lut[(i as usize).min(LUT_SIZE - 1)]);
+        let mut out = vec![u8::MAX; seen.len() * N];
+        for (px, &i) in out.chunks_exact_mut(N).zip(&index) {
+            px[..3].copy_from_slice(&self.lut[(i as usize).min(LUT_SIZE - 1)]);
         }
         out
     }

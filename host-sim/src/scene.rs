@@ -397,16 +397,47 @@ pub fn stride(every: u16) -> String {
 /// # Errors
 /// The file cannot be written.
 pub fn write_samples(samples: &[Sample], path: &std::path::Path) -> Result<()> {
+    let text = samples_text(samples);
+    crate::outfile::write_whole(path, |w| {
+        std::io::Write::write_all(w, text.as_bytes())
+            .with_context(|| format!("cannot write {}", path.display()))
+    })
+}
+
+/// `samples` as the text [`write_samples`] writes, `x y beam` a line.
+pub fn samples_text(samples: &[Sample]) -> String {
     use isoscope_core::output::Beam;
     use std::fmt::Write as _;
     let mut text = String::with_capacity(samples.len() * 12);
     for s in samples {
         let _ = writeln!(text, "{} {} {}", s.x, s.y, u8::from(s.beam == Beam::On));
     }
-    crate::outfile::write_whole(path, |w| {
-        std::io::Write::write_all(w, text.as_bytes())
-            .with_context(|| format!("cannot write {}", path.display()))
-    })
+    text
+}
+
+/// The slice stride a volume of `dims` is drawn at when none is given
+/// (`render`'s default): every slice up to 32 along the longest axis, then
+/// every n-th, n = longest / 32 rounded up.
+pub fn auto_every(dims: crate::volume::Dims) -> usize {
+    let crate::volume::Dims(nx, ny, nz) = dims;
+    nx.max(ny).max(nz).div_ceil(32).max(1)
+}
+
+/// Refresh `screen` with the scene's frame `frames` times: each time the
+/// phosphor decays, then the frame's samples are deposited.
+pub fn refresh(
+    screen: &mut crate::phosphor::Phosphor,
+    scene: &Scene,
+    frames: u32,
+    progress: Option<&Progress>,
+) {
+    for _ in 0..frames.max(1) {
+        screen.decay();
+        screen.deposit(scene.samples.iter().copied());
+        if let Some(p) = progress {
+            p.inc();
+        }
+    }
 }
 
 /// Draw `frames` refreshes of the scene's frame on a simulated phosphor,
@@ -421,12 +452,6 @@ pub fn render(
     progress: Option<&crate::progress::Progress>,
 ) -> Result<crate::phosphor::Phosphor> {
     let mut screen = crate::phosphor::Phosphor::new(picture).context("invalid picture settings")?;
-    for _ in 0..frames.max(1) {
-        screen.decay();
-        screen.deposit(scene.samples.iter().copied());
-        if let Some(p) = progress {
-            p.inc();
-        }
-    }
+    refresh(&mut screen, scene, frames, progress);
     Ok(screen)
 }

@@ -269,6 +269,25 @@ impl LoadedVolume {
         }
     }
 
+    /// As [`LoadedVolume::read_known_with`], for a file's bytes already in
+    /// memory, named `name` ([`formats::read_bytes`]).
+    ///
+    /// # Errors
+    /// The bytes are not a volume of the format their name or first bytes
+    /// tell, or it is larger than `opts` allows.
+    pub fn read_known_bytes(
+        name: &str,
+        bytes: &[u8],
+        opts: &formats::Options,
+    ) -> Result<Option<(Self, Vec<String>)>> {
+        if Path::new(name).extension().and_then(|e| e.to_str()) == Some("den") {
+            let v = Self::read_den(&mut Input::from_slice(bytes), opts.max_bytes)
+                .with_context(|| format!("cannot load {name}"))?;
+            return Ok(Some((v, Vec::new())));
+        }
+        Ok(formats::read_bytes(name, bytes, opts)?.map(|l| (l.volume, l.notes)))
+    }
+
     /// Read a raw volume file in the given byte order: exactly the bytes
     /// of `dims` samples of `dtype`, refusing a file with fewer or more
     /// (it stops reading there: a stream without end is refused too), and

@@ -27,6 +27,20 @@ fn load(name: &str) -> Loaded {
     // The command line's route, `read_known`, gives the same volume.
     let known = LoadedVolume::read_known(&real_data(name)).unwrap().expect("a known format");
     assert_eq!(known, l.volume, "{name}: read_known differs");
+    // The web page's route, the file's bytes, gives it too; a header whose
+    // data are in another file is refused there.
+    let bytes = std::fs::read(real_data(name)).unwrap();
+    match LoadedVolume::read_known_bytes(name, &bytes, &Options::default()) {
+        Ok(Some((v, notes))) => {
+            assert_eq!(v, l.volume, "{name}: read_known_bytes differs");
+            assert_eq!(notes, l.notes, "{name}: read_known_bytes' notes differ");
+        }
+        Err(e) if name.ends_with(".nhdr") || name.ends_with(".hdr") => {
+            let e = format!("{e:#}");
+            assert!(e.contains("file"), "{name}: {e}");
+        }
+        r => panic!("{name}: read_known_bytes gives {:?}", r.map(|o| o.map(|(v, _)| v.dims))),
+    }
     l
 }
 

@@ -10,11 +10,12 @@ fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-const MANIFESTS: [&str; 8] = [
+const MANIFESTS: [&str; 9] = [
     "Cargo.toml",
     "core/Cargo.toml",
     "host-sim/Cargo.toml",
     "tests/Cargo.toml",
+    "web/Cargo.toml",
     "firmware/Cargo.toml",
     "firmware/scene/Cargo.toml",
     "firmware/host-ref/Cargo.toml",

@@ -63,7 +63,7 @@ pub fn parse(bytes: &[u8], opts: &Options) -> Result<Loaded> {
     read_from(&mut Input::from_slice(bytes), opts)
 }
 
-fn read_from(input: &mut Input<'_>, opts: &Options) -> Result<Loaded> {
+pub(crate) fn read_from(input: &mut Input<'_>, opts: &Options) -> Result<Loaded> {
     let mut no = 2;
     if line(input)?.is_none() || line(input)?.is_none() {
         bail!("the file is truncated: a cube file starts with two comment lines and five header lines");

@@ -152,14 +152,40 @@ pub fn read(path: &Path, opts: &Options) -> Result<Option<Loaded>> {
 
 /// Read `path` as `format`.
 pub fn read_as(path: &Path, format: Format, opts: &Options) -> Result<Loaded> {
-    match format {
-        Format::Nrrd => nrrd::read(path, opts),
-        Format::Nifti => nifti::read(path, opts),
-        Format::Mrc => mrc::read(path, opts),
-        Format::Cube => cube::read(path, opts),
-        Format::Vtk => vtk::read(path, opts),
+    Input::open(path)
+        .and_then(|input| read_input(input, format, Some(path), opts))
+        .with_context(|| format!("cannot load {} as {}", path.display(), format.name()))
+}
+
+/// Read a file's bytes, already in memory (a file dropped on a web page):
+/// gzip is inflated as it is read, and `name` or (failing that) the first
+/// bytes tell the format, as [`read`] does; `Ok(None)` if they tell none.
+/// A detached NRRD header or a NIfTI `.hdr` is refused: its data are in
+/// another file.
+pub fn read_bytes(name: &str, bytes: &[u8], opts: &Options) -> Result<Option<Loaded>> {
+    let mut input = Input::from_slice(bytes);
+    if is_gzip(bytes) {
+        input = input.gunzip_rest();
     }
-    .with_context(|| format!("cannot load {} as {}", path.display(), format.name()))
+    let format = match Format::from_name(Path::new(name)).or_else(|| sniff(&mut input)) {
+        Some(f) => f,
+        None => return Ok(None),
+    };
+    read_input(input, format, None, opts)
+        .with_context(|| format!("cannot load {name} as {}", format.name()))
+        .map(Some)
+}
+
+/// Read `input` as `format`; `path` is the file's, where a header may name
+/// a data file beside it (none for bytes in memory).
+fn read_input(mut input: Input<'_>, format: Format, path: Option<&Path>, opts: &Options) -> Result<Loaded> {
+    match format {
+        Format::Nrrd => nrrd::read_from(input, path.and_then(Path::parent), opts),
+        Format::Nifti => nifti::read_from(input, path, opts),
+        Format::Mrc => mrc::read_from(&mut input, opts),
+        Format::Cube => cube::read_from(&mut input, opts),
+        Format::Vtk => vtk::read_from(&mut input, opts),
+    }
 }
 
 /// Check that `opts` asks for the one volume of a single-volume format.
@@ -585,7 +611,11 @@ impl Data<'_, '_> {
 
 /// The format the first KiB of the file (gunzipped if need be) shows.
 fn sniff_file(path: &Path) -> Option<Format> {
-    let mut input = Input::open(path).ok()?;
+    sniff(&mut Input::open(path).ok()?)
+}
+
+/// The format the first KiB of `input` shows, leaving them unread.
+fn sniff(input: &mut Input<'_>) -> Option<Format> {
     // A read error (a short or corrupt stream) still leaves what came.
     let _ = input.peek(1024);
     Format::sniff(input.avail())

@@ -84,7 +84,7 @@ pub fn parse(bytes: &[u8], opts: &Options) -> Result<Loaded> {
     read_from(&mut Input::from_slice(bytes), opts)
 }
 
-fn read_from(input: &mut Input<'_>, opts: &Options) -> Result<Loaded> {
+pub(crate) fn read_from(input: &mut Input<'_>, opts: &Options) -> Result<Loaded> {
     single_volume(opts)?;
     let bytes = input.head(HEADER)?;
     if bytes.len() < HEADER {

@@ -39,9 +39,17 @@ pub fn sizeof_hdr_endian(bytes: &[u8]) -> Option<Endian> {
 /// in the `.img` (`.img.gz`) beside it: the header, then the data it
 /// declares, streamed (a gzip file is inflated as it is read).
 pub fn read(path: &Path, opts: &Options) -> Result<Loaded> {
-    let mut input = Input::open(path)?;
+    read_from(Input::open(path)?, Some(path), opts)
+}
+
+/// Read a NIfTI-1 file from `input`: a `.nii`, or the `.hdr` at `path`
+/// whose data are in the `.img` beside it (none without a `path`).
+pub(crate) fn read_from(mut input: Input<'_>, path: Option<&Path>, opts: &Options) -> Result<Loaded> {
     let h = header(&mut input)?;
     if &h.magic == b"ni1\0" {
+        let Some(path) = path else {
+            bail!("the header's magic `ni1` says the data are in a separate .img file, which is not here");
+        };
         let img = image_path(path).with_context(|| {
             format!(
                 "the header's magic `ni1` says the data are in a separate .img file, and no {} is there",

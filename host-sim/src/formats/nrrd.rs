@@ -134,7 +134,7 @@ pub fn parse(bytes: &[u8], dir: Option<&Path>, opts: &Options) -> Result<Loaded>
     read_from(Input::from_slice(bytes), dir, opts)
 }
 
-fn read_from(mut input: Input<'_>, dir: Option<&Path>, opts: &Options) -> Result<Loaded> {
+pub(crate) fn read_from(mut input: Input<'_>, dir: Option<&Path>, opts: &Options) -> Result<Loaded> {
     single_volume(opts)?;
     let h = header(&mut input)?;
     let get = |k: &str| h.fields.get(k).map(String::as_str);

@@ -247,7 +247,7 @@ pub fn parse(bytes: &[u8], opts: &Options) -> Result<Loaded> {
     read_from(&mut Input::from_slice(bytes), opts)
 }
 
-fn read_from(input: &mut Input<'_>, opts: &Options) -> Result<Loaded> {
+pub(crate) fn read_from(input: &mut Input<'_>, opts: &Options) -> Result<Loaded> {
     let head = input.peek(256)?;
     let first = text(head.split(|&c| c == b'\n').next().unwrap_or_default());
     if !first.starts_with("# vtk DataFile Version") {

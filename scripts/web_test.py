@@ -1,0 +1,342 @@
+#!/usr/bin/env python3
+"""The web app in a real browser: headless Chromium against target/web.
+
+Called by scripts/web-test (which builds the page and installs Chromium).
+Serves target/web with `isoscope-sim serve` on a free port, drives Chromium over the DevTools
+protocol on a pipe (--remote-debugging-pipe: no websocket, nothing to
+install beyond the browser), and for each scene checks that
+
+- the page's frame (window.isoscope.samples(), `x y beam` a line) equals
+  `isoscope-sim render --samples` for the same scene, byte for byte;
+- the canvas equals `isoscope-sim render`'s PNG of that scene, and the
+  first scene's also the golden tests/golden/hydrogen32.png, within the
+  tolerances below.
+
+Standard library only. Usage: web_test.py SIM_BINARY [DATA_DIR]
+"""
+
+import base64
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+import zlib
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+SITE = ROOT / "target" / "web"
+GOLDEN = ROOT / "tests" / "golden" / "hydrogen32.png"
+SIZE = 256
+
+# The canvas against render's PNG of the same samples: the page and the
+# CLI run the same phosphor code, compiled for wasm32 and for the host,
+# whose f32 powf/exp may differ in the last bit (the host's come from the
+# system's libm, wasm's from Rust's), so a pixel's tone may land a table
+# step away. A channel may differ by at most MAX_CHANNEL_DIFF, and on
+# average by at most MEAN_DIFF (of 255); a wrong picture (another view,
+# level or beam) differs by tens on thousands of channels.
+MAX_CHANNEL_DIFF = 3
+MEAN_DIFF = 0.05
+# The canvas against the golden picture tests/tests/render.rs keeps (and
+# ISOSCOPE_BLESS=1 rewrites there): its rule, a mean difference of at most
+# 0.5 and at most 0.1% of the channels off by more than 16, which a
+# 20-degree turn fails.
+GOLDEN_MEAN = 0.5
+GOLDEN_BIG, GOLDEN_BIG_SHARE = 16, 0.001
+
+# (name, page query, render flags): the page's defaults are render's.
+SCENES = [
+    ("hydrogen 32^3, defaults", "demo=hydrogen:32", ["--demo", "hydrogen:32"]),
+    (
+        "torus 24^3 on the f407 board, turned, zoomed out, two planes",
+        "demo=torus:24&level=0.3&yaw=-40&pitch=35&zoom=0.75&axes=xy,yz&every=2&board=f407",
+        ["--demo", "torus:24", "--level", "0.3", "--yaw", "-40", "--pitch", "35", "--margin", "0.125",
+         "--axes", "xy,yz", "--every", "2", "--board", "f407"],
+    ),
+]
+# A real volume, opened through the page's file input.
+FILE_SCENE = "brainsmall.den"
+
+
+def fail(msg):
+    print(f"web-test: FAIL: {msg}", file=sys.stderr)
+    sys.exit(1)
+
+
+def serve(sim):
+    """`isoscope-sim serve` on a free port; its process and base address."""
+    proc = subprocess.Popen([sim, "serve", "--dir", str(SITE), "--listen", "127.0.0.1:0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    first = proc.stdout.readline().strip()
+    if not first.startswith("http://"):
+        proc.kill()
+        fail(f"isoscope-sim serve printed {first!r}, not its address")
+    return proc, first.split("?")[0] + "index.html"
+
+
+class Browser:
+    """Chromium with the DevTools protocol on fds 3 (in) and 4 (out)."""
+
+    def __init__(self, exe, profile):
+        to_child_r, self.to_child = os.pipe()
+        self.from_child, from_child_w = os.pipe()
+        args = [exe, "--headless=new", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                "--disable-component-update", "--disable-sync", "--no-first-run", "--disable-extensions",
+                "--force-color-profile=srgb", "--remote-debugging-pipe", f"--user-data-dir={profile}",
+                "about:blank"]
+
+        def fds():
+            os.dup2(to_child_r, 3)
+            os.dup2(from_child_w, 4)
+
+        self.proc = subprocess.Popen(args, pass_fds=(3, 4), preexec_fn=fds, stdout=subprocess.DEVNULL,
+                                     stderr=subprocess.DEVNULL)
+        os.close(to_child_r)
+        os.close(from_child_w)
+        self.buf = b""
+        self.next_id = 0
+        self.session = None
+
+    def send(self, method, params=None, session=True, timeout=60):
+        self.next_id += 1
+        msg = {"id": self.next_id, "method": method, "params": params or {}}
+        if session and self.session:
+            msg["sessionId"] = self.session
+        os.write(self.to_child, json.dumps(msg).encode() + b"\0")
+        deadline = time.monotonic() + timeout
+        while True:
+            while b"\0" not in self.buf:
+                if time.monotonic() > deadline:
+                    fail(f"no answer to {method} within {timeout} s")
+                chunk = os.read(self.from_child, 1 << 20)
+                if not chunk:
+                    fail(f"Chromium closed the pipe during {method}")
+                self.buf += chunk
+            line, self.buf = self.buf.split(b"\0", 1)
+            reply = json.loads(line)
+            if reply.get("id") == self.next_id:
+                if "error" in reply:
+                    fail(f"{method}: {reply['error']}")
+                return reply.get("result", {})
+
+    def attach(self):
+        target = self.send("Target.createTarget", {"url": "about:blank"}, session=False)["targetId"]
+        self.session = self.send("Target.attachToTarget", {"targetId": target, "flatten": True},
+                                 session=False)["sessionId"]
+
+    def eval(self, expr, timeout=60):
+        r = self.send("Runtime.evaluate", {"expression": expr, "returnByValue": True, "awaitPromise": True},
+                      timeout=timeout)
+        if "exceptionDetails" in r:
+            fail(f"{expr}: {r['exceptionDetails']}")
+        return r["result"].get("value")
+
+    def wait(self, expr, what, timeout=60):
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.eval(expr):
+                return
+            time.sleep(0.05)
+        fail(f"timed out waiting for {what}")
+
+    def close(self):
+        try:
+            self.send("Browser.close", session=False, timeout=10)
+        except SystemExit:
+            pass
+        try:
+            self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+
+
+READY = "window.isoscope && (window.isoscope.ready || window.isoscope.error !== null)"
+CANVAS = """(() => {
+  const c = document.getElementById('screen');
+  const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+  let s = '';
+  for (let i = 0; i < d.length; i += 0x8000) s += String.fromCharCode.apply(null, d.subarray(i, i + 0x8000));
+  return [c.width, c.height, btoa(s)];
+})()"""
+
+
+def page_frame(b):
+    """The page's samples and canvas (RGB), once its picture is up."""
+    err = b.eval("window.isoscope.error")
+    if err:
+        fail(f"the page shows an error: {err}")
+    samples = b.eval("window.isoscope.samples()")
+    w, h, data = b.eval(CANVAS)
+    rgba = base64.b64decode(data)
+    rgb = bytes(x for i, x in enumerate(rgba) if i % 4 != 3)
+    return samples, (w, h, rgb)
+
+
+def read_png(path):
+    """An 8-bit RGB or RGBA, non-interlaced PNG as (width, height, RGB bytes)."""
+    data = Path(path).read_bytes()
+    if data[:8] != b"\x89PNG\r\n\x1a\n":
+        fail(f"{path} is not a PNG")
+    pos, idat, w = 8, b"", None
+    while pos < len(data):
+        n = int.from_bytes(data[pos:pos + 4], "big")
+        kind, body = data[pos + 4:pos + 8], data[pos + 8:pos + 8 + n]
+        pos += 12 + n
+        if kind == b"IHDR":
+            w, h = int.from_bytes(body[0:4], "big"), int.from_bytes(body[4:8], "big")
+            depth, ctype, interlace = body[8], body[9], body[12]
+            if depth != 8 or ctype not in (2, 6) or interlace:
+                fail(f"{path}: only 8-bit RGB(A) non-interlaced PNGs are read here")
+            bpp = 3 if ctype == 2 else 4
+        elif kind == b"IDAT":
+            idat += body
+    raw = zlib.decompress(idat)
+    stride = w * bpp
+    out, prev = bytearray(), bytearray(stride)
+    for y in range(h):
+        f, line = raw[y * (stride + 1)], bytearray(raw[y * (stride + 1) + 1:(y + 1) * (stride + 1)])
+        for i in range(stride):
+            a = line[i - bpp] if i >= bpp else 0
+            b, c = prev[i], prev[i - bpp] if i >= bpp else 0
+            if f == 1:
+                line[i] = (line[i] + a) & 255
+            elif f == 2:
+                line[i] = (line[i] + b) & 255
+            elif f == 3:
+                line[i] = (line[i] + (a + b) // 2) & 255
+            elif f == 4:
+                p = a + b - c
+                pa, pb, pc = abs(p - a), abs(p - b), abs(p - c)
+                line[i] = (line[i] + (a if pa <= pb and pa <= pc else b if pb <= pc else c)) & 255
+        out += line
+        prev = line
+    rgb = out if bpp == 3 else bytes(x for i, x in enumerate(out) if i % 4 != 3)
+    return w, h, bytes(rgb)
+
+
+def compare(name, got, want, what, golden=False):
+    (gw, gh, g), (ww, wh, wpx) = got, want
+    if (gw, gh) != (ww, wh):
+        fail(f"{name}: the canvas is {gw}x{gh}, {what} {ww}x{wh}")
+    diffs = [abs(a - b) for a, b in zip(g, wpx)]
+    worst, mean = max(diffs), sum(diffs) / len(diffs)
+    big = sum(1 for d in diffs if d > GOLDEN_BIG)
+    lit = sum(1 for x in wpx if x > 16)
+    print(f"web-test: {name}: canvas vs {what}: max channel diff {worst}, mean {mean:.4f}, "
+          f"{big} channels off by more than {GOLDEN_BIG} ({lit} lit channels)")
+    if lit < 1000:
+        fail(f"{name}: {what} is almost black ({lit} lit channels)")
+    if golden:
+        if mean > GOLDEN_MEAN or big > GOLDEN_BIG_SHARE * len(diffs):
+            fail(f"{name}: the canvas differs from {what} beyond the golden tolerance")
+    elif worst > MAX_CHANNEL_DIFF or mean > MEAN_DIFF:
+        fail(f"{name}: the canvas differs from {what} (max {worst} > {MAX_CHANNEL_DIFF} or mean {mean:.4f} > "
+             f"{MEAN_DIFF})")
+
+
+def render(sim, flags, tmp, tag):
+    samples, png = tmp / f"{tag}.txt", tmp / f"{tag}.png"
+    subprocess.run([sim, "render", *flags, "--size", str(SIZE), "--samples", str(samples), "-o", str(png)],
+                   check=True, stderr=subprocess.DEVNULL)
+    return samples.read_text(), read_png(png)
+
+
+def check_scene(b, name, got, sim_flags, sim, tmp, tag, golden=None):
+    samples, canvas = got
+    want_samples, want_png = render(sim, sim_flags, tmp, tag)
+    n = want_samples.count("\n")
+    if samples != want_samples:
+        g, w = samples.splitlines(), want_samples.splitlines()
+        first = next((i for i, (x, y) in enumerate(zip(g, w)) if x != y), min(len(g), len(w)))
+        fail(f"{name}: the page's {len(g)} samples differ from render's {len(w)} from sample {first}")
+    print(f"web-test: {name}: {n} samples equal render --samples, sample for sample")
+    compare(name, canvas, want_png, "render's PNG")
+    if golden is not None:
+        compare(name, canvas, read_png(golden), f"the golden {golden.name}", golden=True)
+
+
+def main():
+    if len(sys.argv) < 2:
+        fail("usage: web_test.py SIM_BINARY [DATA_DIR]")
+    sim = sys.argv[1]
+    data = Path(sys.argv[2]) if len(sys.argv) > 2 and sys.argv[2] else None
+    exe = shutil.which("chromium") or shutil.which("chromium-browser")
+    if not exe:
+        fail("no chromium on PATH (scripts/web-test installs it)")
+    if not (SITE / "index.html").exists():
+        fail(f"{SITE} holds no page: run scripts/web-build")
+    server, base = serve(sim)
+    with tempfile.TemporaryDirectory(prefix="isoscope-web-") as tmpdir:
+        tmp = Path(tmpdir)
+        b = Browser(exe, tmp / "profile")
+        try:
+            b.attach()
+            for i, (name, query, flags) in enumerate(SCENES):
+                b.send("Page.navigate", {"url": f"{base}?{query}&size={SIZE}"})
+                b.wait(READY, f"{name} to show")
+                check_scene(b, name, page_frame(b), flags, sim, tmp, f"scene{i}", GOLDEN if i == 0 else None)
+            # The controls: drag on the screen (40 px right, 20 px down: yaw
+            # and pitch +20 and +10 degrees at half a degree a pixel), then
+            # the level slider to 0.2; the page then draws render's scene.
+            b.send("Page.navigate", {"url": f"{base}?demo=hydrogen:32&size={SIZE}"})
+            b.wait(READY, "hydrogen to show")
+            frames = b.eval("window.isoscope.frames")
+            box = b.eval("(() => { const r = document.getElementById('screen').getBoundingClientRect(); "
+                         "return [r.left + r.width / 2, r.top + r.height / 2]; })()")
+            x, y = round(box[0]), round(box[1])
+            mouse = {"button": "left", "buttons": 1, "clickCount": 1}
+            b.send("Input.dispatchMouseEvent", {"type": "mousePressed", "x": x, "y": y, **mouse})
+            for step in range(1, 5):
+                b.send("Input.dispatchMouseEvent", {"type": "mouseMoved", "x": x + 10 * step, "y": y + 5 * step,
+                                                    **mouse})
+            b.send("Input.dispatchMouseEvent", {"type": "mouseReleased", "x": x + 40, "y": y + 20, **mouse})
+            b.eval("(() => { const s = document.getElementById('level'); s.value = '0.2'; "
+                   "s.dispatchEvent(new Event('input')); })()")
+            # A redraw after the slider's event has both changes.
+            b.wait(f"window.isoscope.frames > {frames} && !window.isoscope.pending() && "
+                   "(() => { const v = window.isoscope.view(); return v.yaw === 50 && v.pitch === 30; })()",
+                   "the dragged view and the new level to show", timeout=30)
+            check_scene(b, "hydrogen 32^3 dragged and at level 0.2", page_frame(b),
+                        ["--demo", "hydrogen:32", "--yaw", "50", "--pitch", "30", "--level", "0.2"], sim, tmp,
+                        "dragged")
+            if data and (data / FILE_SCENE).exists():
+                path = data / FILE_SCENE
+                b.send("Page.navigate", {"url": f"{base}?size={SIZE}"})
+                b.wait(READY, "the page to show its first demo")
+                b.send("DOM.enable")
+                root = b.send("DOM.getDocument")["root"]["nodeId"]
+                node = b.send("DOM.querySelector", {"nodeId": root, "selector": "#file"})["nodeId"]
+                b.send("DOM.setFileInputFiles", {"nodeId": node, "files": [str(path)]})
+                b.wait(f"(() => {{ const i = window.isoscope.info(); return window.isoscope.error !== null || "
+                       f"(i && i.name === {json.dumps(FILE_SCENE)} && window.isoscope.frames >= 2); }})()",
+                       f"{FILE_SCENE} to load")
+                check_scene(b, f"{FILE_SCENE} from the file input", page_frame(b), [str(path)], sim, tmp, "file")
+            else:
+                print(f"web-test: note: no {FILE_SCENE} in the data folder; the file input is not tested")
+            # A bad file: a clear error in the page, no crash.
+            bad = tmp / "broken.nrrd"
+            bad.write_bytes(b"NRRD0004\ntype: float\ndimension: 3\nsizes: 4 4 4\nendian: little\nencoding: raw\n\n\x00\x00")
+            b.send("Page.navigate", {"url": f"{base}?size={SIZE}"})
+            b.wait(READY, "the page to show its first demo")
+            b.send("DOM.enable")
+            root = b.send("DOM.getDocument")["root"]["nodeId"]
+            node = b.send("DOM.querySelector", {"nodeId": root, "selector": "#file"})["nodeId"]
+            b.send("DOM.setFileInputFiles", {"nodeId": node, "files": [str(bad)]})
+            b.wait("window.isoscope.error !== null", "the page to report the broken file")
+            shown = b.eval("document.getElementById('error').hidden ? '' : "
+                           "document.getElementById('error').textContent")
+            if "broken.nrrd" not in shown or "truncated" not in shown:
+                fail(f"the broken file's error is not shown clearly: {shown!r}")
+            print(f"web-test: a broken file shows: {shown}")
+        finally:
+            b.close()
+            server.kill()
+            server.wait()
+    print("web-test: ok")
+
+
+if __name__ == "__main__":
+    main()

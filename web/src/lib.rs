@@ -1,0 +1,459 @@
+//! isoscope in the browser: a small API over `isoscope-sim`'s library,
+//! compiled to WebAssembly.
+//!
+//! Nothing here draws or reads on its own: a volume is read by the host's
+//! readers ([`LoadedVolume::read_known_bytes`], gzip included), its frame
+//! is built by the one picture pipeline ([`scene::build`]: the board's
+//! engine in process, as `isoscope-sim render` builds it), and drawn by the
+//! same phosphor model ([`Phosphor`]). This crate holds the page's state
+//! (the volume, the settings, the last frame and picture) and turns it into
+//! values JavaScript takes: RGBA pixels, the samples as text, and JSON.
+//!
+//! Every method that can fail returns a JavaScript error with the message
+//! the command line would print; none panics on bad input.
+
+use anyhow::{Context, Result, bail};
+use isoscope_core::beam::BeamConfig;
+use isoscope_core::contour::grid::Plane;
+use isoscope_core::engine::Board;
+use isoscope_core::view::View;
+use isoscope_sim::formats::Options;
+use isoscope_sim::info::{LEVEL_BINS, Summary, summarize};
+use isoscope_sim::link::WireVolume;
+use isoscope_sim::phosphor::{Phosphor, PhosphorConfig};
+use isoscope_sim::scene::{self, Scene, SceneConfig};
+use isoscope_sim::volume::{DemoSpec, LoadedVolume};
+use std::fmt::Write as _;
+use wasm_bindgen::prelude::*;
+
+/// The largest volume a page loads, in bytes of samples: a wasm32 page has
+/// 4 GiB of address space at most, and loading holds the file's bytes, the
+/// volume read and the volume as the board takes it at once.
+pub const MAX_VOLUME_BYTES: usize = 256 << 20;
+
+/// The zoom of `render`'s default margin (5%).
+const DEFAULT_ZOOM: f64 = 0.9;
+
+/// The largest picture, in pixels a side.
+const MAX_SIZE: u32 = 2048;
+
+/// A loaded volume and what the page shows of it.
+struct Volume {
+    /// Its name: the file's, or the demo's `NAME:N`.
+    name: String,
+    wire: WireVolume,
+    summary: Summary,
+    /// The levels it is drawn at first: a demo's own, or the first level
+    /// `info` suggests.
+    default_levels: Vec<f32>,
+    /// The readers' remarks.
+    notes: Vec<String>,
+}
+
+/// The scope in the page: a volume, the settings, and the picture.
+#[wasm_bindgen]
+pub struct Scope {
+    volume: Option<Volume>,
+    levels: Vec<f32>,
+    planes: Vec<Plane>,
+    /// The slice stride asked for; 0: the volume's default
+    /// ([`scene::auto_every`]).
+    every: usize,
+    yaw: f32,
+    pitch: f32,
+    zoom: f64,
+    board: Option<Board>,
+    /// The frame of the settings, `None` when they changed since.
+    scene: Option<Scene>,
+    /// Milliseconds the last frame took to build and draw.
+    build_ms: f64,
+    draw_ms: f64,
+    screen: Phosphor,
+}
+
+/// An `anyhow` error, its causes included, as a JavaScript error.
+fn js(e: anyhow::Error) -> JsError {
+    JsError::new(&format!("{e:#}"))
+}
+
+#[wasm_bindgen]
+impl Scope {
+    /// A scope drawing a `size` by `size` picture, showing nothing yet.
+    ///
+    /// # Errors
+    /// A size of 0 or above 2048.
+    #[wasm_bindgen(constructor)]
+    pub fn new(size: u32) -> Result<Scope, JsError> {
+        Self::with_size(size).map_err(js)
+    }
+
+    /// Load the built-in demo `NAME:N` (as `--demo`), e.g. `hydrogen:32`.
+    ///
+    /// # Errors
+    /// An unknown demo or a size out of range.
+    pub fn load_demo(&mut self, spec: &str) -> Result<(), JsError> {
+        self.demo(spec).map_err(js)
+    }
+
+    /// Load a volume file from its bytes, in any format `isoscope-sim`
+    /// reads by name or first bytes (gzipped or not); `name` is the file's.
+    ///
+    /// # Errors
+    /// Not a volume file that names or bytes tell, or a bad one: the
+    /// reader's message.
+    pub fn load_file(&mut self, name: &str, bytes: &[u8]) -> Result<(), JsError> {
+        self.file(name, bytes).map_err(js)
+    }
+
+    /// The contour levels (one to four).
+    pub fn set_levels(&mut self, levels: Vec<f32>) {
+        if levels != self.levels {
+            self.levels = levels;
+            self.scene = None;
+        }
+    }
+
+    /// The view: yaw and pitch in degrees, and zoom, the share of the
+    /// screen the volume's box fills (0.1 to 1; the default 0.9 is the
+    /// board's 5% margin).
+    pub fn set_view(&mut self, yaw: f32, pitch: f32, zoom: f64) {
+        let zoom = if zoom.is_finite() { zoom.clamp(0.1, 1.0) } else { DEFAULT_ZOOM };
+        if (yaw, pitch, zoom) != (self.yaw, self.pitch, self.zoom) {
+            (self.yaw, self.pitch, self.zoom) = (yaw, pitch, zoom);
+            self.scene = None;
+        }
+    }
+
+    /// The slicing planes as `--axes` takes them, e.g. `xy,yz`.
+    ///
+    /// # Errors
+    /// An unknown plane or none.
+    pub fn set_planes(&mut self, axes: &str) -> Result<(), JsError> {
+        let planes = planes(axes).map_err(js)?;
+        if planes != self.planes {
+            self.planes = planes;
+            self.scene = None;
+        }
+        Ok(())
+    }
+
+    /// Draw every `every`-th slice of each plane; 0 for the volume's
+    /// default (as `render`: longest axis / 32, rounded up).
+    pub fn set_every(&mut self, every: u32) {
+        let every = every as usize;
+        if every != self.every {
+            self.every = every;
+            self.scene = None;
+        }
+    }
+
+    /// Draw with a board's memory and clock (`f407`), or the host's (an
+    /// empty name).
+    ///
+    /// # Errors
+    /// An unknown board.
+    pub fn set_board(&mut self, name: &str) -> Result<(), JsError> {
+        let board = match name.trim() {
+            "" | "host" => None,
+            n => Some(Board::named(n).ok_or_else(|| JsError::new(&format!("unknown board `{n}`")))?),
+        };
+        if board != self.board {
+            self.board = board;
+            self.scene = None;
+        }
+        Ok(())
+    }
+
+    /// Build the frame and draw it if the settings changed; whether they
+    /// had.
+    ///
+    /// # Errors
+    /// No volume, or settings the pipeline refuses (no level, a level
+    /// list the board cannot take, a volume too large for the board).
+    pub fn update(&mut self) -> Result<bool, JsError> {
+        if self.scene.is_some() {
+            return Ok(false);
+        }
+        self.redraw().map_err(js)?;
+        Ok(true)
+    }
+
+    /// The picture: `size * size` RGBA pixels, row by row from the top.
+    pub fn pixels(&self) -> Vec<u8> {
+        self.screen.to_rgba8()
+    }
+
+    /// The picture's width and height in pixels.
+    pub fn size(&self) -> u32 {
+        self.screen.config().width
+    }
+
+    /// The frame's samples as `render --samples` writes them, `x y beam`
+    /// a line (empty before the first frame).
+    pub fn samples_text(&self) -> String {
+        self.scene.as_ref().map_or_else(String::new, |s| scene::samples_text(&s.samples))
+    }
+
+    /// The volume as JSON: `name`, `dims`, `dtype`, `range` (or null),
+    /// `histogram`, `suggested` and `default_levels`, and the readers'
+    /// `notes`; `null` with no volume.
+    pub fn info(&self) -> String {
+        let Some(v) = &self.volume else { return "null".into() };
+        let s = &v.summary;
+        let mut o = Json::default();
+        o.str("name", &v.name);
+        o.raw("dims", &format!("[{},{},{}]", s.dims.0, s.dims.1, s.dims.2));
+        o.str("dtype", s.dtype);
+        o.raw("range", &s.range.map_or("null".into(), |(lo, hi)| format!("[{},{}]", num(lo), num(hi))));
+        o.raw("histogram", &list(s.histogram.iter().map(u64::to_string)));
+        o.raw("suggested", &list(s.suggested.iter().map(|&l| num(l))));
+        o.raw("default_levels", &list(v.default_levels.iter().map(|&l| num(l))));
+        o.raw("notes", &list(v.notes.iter().map(|n| quote(n))));
+        o.end()
+    }
+
+    /// The last frame as JSON: `points`, `polylines`, `samples`,
+    /// `lit_samples`, `blank_ratio` (blanked travel over lit length),
+    /// `fps` (refreshes a second at the sample rate), `sample_rate_hz`,
+    /// `every`, `board`, `remarks` (what `render` says on stderr), and
+    /// `build_ms`, `draw_ms`; `null` before the first frame.
+    pub fn stats(&self) -> String {
+        let Some(sc) = &self.scene else { return "null".into() };
+        let mut o = Json::default();
+        o.raw("points", &sc.points.to_string());
+        o.raw("polylines", &sc.polylines.to_string());
+        o.raw("samples", &sc.frame.samples.to_string());
+        o.raw("lit_samples", &sc.frame.lit_samples.to_string());
+        o.raw("blank_ratio", &num(sc.blank_ratio()));
+        o.raw("fps", &num(sc.fps()));
+        o.raw("sample_rate_hz", &sc.sample_rate_hz.to_string());
+        o.raw("every", &sc.loaded.every.to_string());
+        o.str("board", sc.board.map_or("host", |b| b.name));
+        o.raw("remarks", &list(sc.remarks().iter().map(|r| quote(r))));
+        o.raw("build_ms", &format!("{:.3}", self.build_ms));
+        o.raw("draw_ms", &format!("{:.3}", self.draw_ms));
+        o.end()
+    }
+}
+
+impl Scope {
+    fn with_size(size: u32) -> Result<Self> {
+        if !(1..=MAX_SIZE).contains(&size) {
+            bail!("the picture must be 1 to {MAX_SIZE} pixels a side, not {size}");
+        }
+        let screen =
+            Phosphor::new(PhosphorConfig::with_size(size, size)).context("invalid picture settings")?;
+        Ok(Self {
+            volume: None,
+            levels: Vec::new(),
+            planes: Plane::ALL.to_vec(),
+            every: 0,
+            yaw: View::DEFAULT.yaw,
+            pitch: View::DEFAULT.pitch,
+            zoom: DEFAULT_ZOOM,
+            board: None,
+            scene: None,
+            build_ms: 0.0,
+            draw_ms: 0.0,
+            screen,
+        })
+    }
+
+    fn demo(&mut self, spec: &str) -> Result<()> {
+        let spec: DemoSpec = spec.trim().parse().map_err(anyhow::Error::msg)?;
+        let bytes = spec.n.saturating_pow(3).saturating_mul(4);
+        if bytes > MAX_VOLUME_BYTES {
+            bail!(
+                "the demo's {}^3 samples take {} MiB; a page takes {} MiB",
+                spec.n,
+                bytes >> 20,
+                MAX_VOLUME_BYTES >> 20
+            );
+        }
+        let vol = LoadedVolume::demo(spec)?;
+        let name = format!("{}:{}", spec.demo.name(), spec.n);
+        self.set_volume(name, &vol, vec![spec.demo.default_level()], Vec::new())
+    }
+
+    fn file(&mut self, name: &str, bytes: &[u8]) -> Result<()> {
+        let opts = Options { index: 0, max_bytes: MAX_VOLUME_BYTES };
+        let Some((vol, notes)) = LoadedVolume::read_known_bytes(name, bytes, &opts)? else {
+            bail!(
+                "{name}: not a volume file the page knows by its name or first bytes \
+                 (.den, .nrrd, .nii, .mrc/.map/.ccp4, .cube, .vtk, any of them gzipped; \
+                 raw files need isoscope-sim's --dims and --dtype)"
+            );
+        };
+        // The level `render` draws a file at: the first suggested over
+        // `LEVEL_BINS` bins, as in the summary the page shows.
+        let Some(&level) = summarize(&vol, LEVEL_BINS).suggested.first() else {
+            bail!("{name}: its values suggest no level to draw (it is constant or empty)");
+        };
+        self.set_volume(name.to_string(), &vol, vec![level], notes)
+    }
+
+    fn set_volume(
+        &mut self,
+        name: String,
+        vol: &LoadedVolume,
+        levels: Vec<f32>,
+        notes: Vec<String>,
+    ) -> Result<()> {
+        let wire = WireVolume::from_loaded(vol)?;
+        let summary = summarize(vol, LEVEL_BINS);
+        self.levels.clone_from(&levels);
+        self.volume = Some(Volume { name, wire, summary, default_levels: levels, notes });
+        self.scene = None;
+        Ok(())
+    }
+
+    /// The scene configuration, as `render` makes it from its flags.
+    fn config(&self, vol: &Volume) -> SceneConfig {
+        let view = View {
+            yaw: self.yaw,
+            pitch: self.pitch,
+            // In f64, so that a zoom of 0.9 is render's margin of 0.05.
+            margin: ((1.0 - self.zoom) / 2.0) as f32,
+            spacing: vol.wire.spacing,
+            ..View::DEFAULT
+        };
+        let base = match self.board {
+            Some(b) => SceneConfig::board(b, self.levels.clone()),
+            None => SceneConfig { levels: self.levels.clone(), ..SceneConfig::default() },
+        };
+        let every = match self.every {
+            0 => {
+                let [nx, ny, nz] = vol.wire.dims;
+                scene::auto_every(isoscope_sim::volume::Dims(nx.into(), ny.into(), nz.into()))
+            }
+            n => n,
+        };
+        let beam = BeamConfig { bits: view.bits, ..BeamConfig::default() };
+        SceneConfig { planes: self.planes.clone(), every, view, beam, ..base }
+    }
+
+    fn redraw(&mut self) -> Result<()> {
+        let vol = self.volume.as_ref().context("no volume loaded")?;
+        let cfg = self.config(vol);
+        let t0 = web_time::Instant::now();
+        let built = scene::build(&vol.wire, &cfg)?;
+        let t1 = web_time::Instant::now();
+        // A frame on a dark screen, as `render` draws it (one refresh).
+        self.screen.clear();
+        scene::refresh(&mut self.screen, &built, 1, None);
+        self.build_ms = (t1 - t0).as_secs_f64() * 1e3;
+        self.draw_ms = t1.elapsed().as_secs_f64() * 1e3;
+        self.scene = Some(built);
+        Ok(())
+    }
+}
+
+/// Planes from `xy,xz,yz` (any of them, once each).
+fn planes(axes: &str) -> Result<Vec<Plane>> {
+    let mut out = Vec::new();
+    for a in axes.split(',').map(str::trim).filter(|a| !a.is_empty()) {
+        let p =
+            Plane::from_name(a).with_context(|| format!("unknown plane `{a}` (expected xy, xz or yz)"))?;
+        if !out.contains(&p) {
+            out.push(p);
+        }
+    }
+    if out.is_empty() {
+        bail!("no slicing plane");
+    }
+    Ok(out)
+}
+
+/// A JSON object, built field by field.
+#[derive(Default)]
+struct Json(String);
+
+impl Json {
+    fn raw(&mut self, key: &str, value: &str) {
+        self.0.push(if self.0.is_empty() { '{' } else { ',' });
+        let _ = write!(self.0, "{}:{value}", quote(key));
+    }
+
+    fn str(&mut self, key: &str, value: &str) {
+        self.raw(key, &quote(value));
+    }
+
+    fn end(mut self) -> String {
+        if self.0.is_empty() {
+            self.0.push('{');
+        }
+        self.0.push('}');
+        self.0
+    }
+}
+
+/// A JSON string.
+fn quote(s: &str) -> String {
+    let mut out = String::with_capacity(s.len() + 2);
+    out.push('"');
+    for c in s.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            c if u32::from(c) < 0x20 => {
+                let _ = write!(out, "\\u{:04x}", u32::from(c));
+            }
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
+}
+
+/// A JSON number (`null` for NaN or infinity, which JSON lacks).
+fn num(x: f32) -> String {
+    if x.is_finite() { format!("{x}") } else { "null".into() }
+}
+
+/// A JSON array of values already in JSON.
+fn list(items: impl Iterator<Item = String>) -> String {
+    format!("[{}]", items.collect::<Vec<_>>().join(","))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_page_draws_what_render_draws() {
+        let mut s = Scope::with_size(64).unwrap();
+        s.demo("hydrogen:16").unwrap();
+        s.redraw().unwrap();
+        let vol = LoadedVolume::demo("hydrogen:16".parse().unwrap()).unwrap();
+        let cfg = SceneConfig { levels: vec![0.1], ..SceneConfig::default() };
+        let want = scene::build(&WireVolume::from_loaded(&vol).unwrap(), &cfg).unwrap();
+        assert_eq!(s.scene.as_ref().unwrap().samples, want.samples);
+        assert_eq!(s.pixels().len(), 64 * 64 * 4);
+        assert!(s.stats().contains("\"points\":"));
+    }
+
+    #[test]
+    fn bad_input_is_an_error_not_a_panic() {
+        let mut s = Scope::with_size(32).unwrap();
+        assert!(s.file("x.nrrd", b"NRRD0004\ntype: float\n").is_err());
+        assert!(s.file("x.bin", &[1, 2, 3]).unwrap_err().to_string().contains("not a volume file"));
+        assert!(s.file("x.nii.gz", &[0x1f, 0x8b, 0, 0]).is_err());
+        assert!(s.demo("nothing:3").is_err());
+        assert!(s.redraw().is_err());
+        s.demo("sphere:8").unwrap();
+        s.set_levels(vec![]);
+        assert!(s.redraw().is_err());
+        s.set_levels(vec![f32::NAN]);
+        assert!(s.redraw().is_err());
+        assert!(planes("xy,ab").is_err());
+        assert!(Scope::with_size(0).is_err());
+    }
+
+    #[test]
+    fn json_is_escaped() {
+        assert_eq!(quote("a\"b\\\n"), "\"a\\\"b\\\\\\u000a\"");
+        let mut o = Json::default();
+        o.raw("n", &num(f32::NAN));
+        assert_eq!(o.end(), "{\"n\":null}");
+    }
+}
