@@ -5,6 +5,9 @@
 //!   cube, VTK legacy), one module each.
 //! - [`contour`]: parallel chicken-wire contouring of a volume into records,
 //!   and their CSV export.
+//! - [`fit`]: a volume fitted to a board: `--crop`, `--downsample` (block
+//!   means), the smallest downsample a board takes, the narrowest exact
+//!   sample type.
 //! - [`info`]: a volume's summary, histogram and suggested levels.
 //! - [`progress`]: progress lines on a terminal for long work.
 //! - [`scene`]: a whole frame: contour, project, display list, cull,
@@ -34,6 +37,7 @@ pub mod animate;
 pub mod board;
 pub mod contour;
 pub mod device;
+pub mod fit;
 pub mod formats;
 pub mod info;
 pub mod link;

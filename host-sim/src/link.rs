@@ -456,13 +456,14 @@ pub fn volume_messages<'v>(
 /// Go-backs without progress after which `send_volume` gives up.
 pub const MAX_STALLS: u32 = 64;
 
-/// Stream `vol` to the board behind `reader`/`writer`.
+/// Stream `vol` to the board behind `reader`/`writer`: [`connect`], then
+/// [`Connection::send`].
 ///
 /// # Errors
 /// No answer, a volume the board cannot take, or a refused command.
 pub fn send_volume<R, W>(
     reader: R,
-    mut writer: W,
+    writer: W,
     vol: &WireVolume,
     cfg: &SendConfig,
     progress: Option<&Progress>,
@@ -471,18 +472,75 @@ where
     R: Read + Send + 'static,
     W: Write,
 {
-    let levels = cfg.check()?;
+    cfg.check()?;
+    connect(reader, writer)?.send(vol, cfg, progress)
+}
+
+/// A board that has said hello: what it takes ([`Connection::board`]) is
+/// known before a volume is chosen for it.
+pub struct Connection<W> {
+    listener: Listener,
+    writer: W,
+    seq0: u16,
+    board: BoardInfo,
+}
+
+impl<W> std::fmt::Debug for Connection<W> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Connection").field("board", &self.board).finish_non_exhaustive()
+    }
+}
+
+/// Greet the board behind `reader`/`writer` and learn what it takes.
+///
+/// # Errors
+/// No answer, or another protocol version.
+pub fn connect<R, W>(reader: R, mut writer: W) -> Result<Connection<W>>
+where
+    R: Read + Send + 'static,
+    W: Write,
+{
     let listener = Listener::start(reader);
     // Every command frame, in order, with consecutive sequence numbers from
     // seq0, which the Hello announces.
     let seq0 = (Instant::now().elapsed().subsec_nanos() as u16) ^ 0x5A5A;
     let board = handshake(&mut writer, &listener, seq0)?;
+    Ok(Connection { listener, writer, seq0, board })
+}
+
+impl<W: Write> Connection<W> {
+    /// What the board said it takes.
+    pub fn board(&self) -> &BoardInfo {
+        &self.board
+    }
+
+    /// Stream `vol` to the board.
+    ///
+    /// # Errors
+    /// A volume the board cannot take, a refused command, or no answer.
+    pub fn send(self, vol: &WireVolume, cfg: &SendConfig, progress: Option<&Progress>) -> Result<SendReport> {
+        let Connection { listener, mut writer, seq0, board } = self;
+        send_on(&listener, &mut writer, seq0, board, vol, cfg, progress)
+    }
+}
+
+/// The transfer of [`Connection::send`].
+fn send_on<W: Write>(
+    listener: &Listener,
+    writer: &mut W,
+    seq0: u16,
+    board: BoardInfo,
+    vol: &WireVolume,
+    cfg: &SendConfig,
+    progress: Option<&Progress>,
+) -> Result<SendReport> {
+    let levels = cfg.check()?;
     if board.sample_types & vol.sample_type.bit() == 0 {
         bail!("the board does not take {:?} samples", vol.sample_type);
     }
     if vol.slice_bytes() as u64 > u64::from(board.max_slice_samples) {
         bail!(
-            "a {}x{} slice of {:?} is {} bytes; the board holds {} (send a smaller or resampled volume)",
+            "a {}x{} slice of {:?} is {} bytes; the board holds {} (--downsample or --crop makes it smaller)",
             vol.dims[0],
             vol.dims[1],
             vol.sample_type,

@@ -35,9 +35,12 @@ use std::process::ExitCode;
   isoscope-sim contour --demo torus:32 --format svg -o torus.svg
   isoscope-sim contour data.raw --dims 256x256x128 --dtype i16 --level 300 -o ct.csv
 
-Volumes: a raw file (--dims NXxNYxNZ --dtype u8|u16|i16|f32, x fastest), a VolPack .den file, or
---demo hydrogen:N | gyroid:N | sphere:N | torus:N. Levels: --level L (repeatable); a demo has a
-default. 'isoscope-sim COMMAND --help' lists every flag."
+Volumes: NIfTI-1 (.nii, .hdr), NRRD (.nrrd, .nhdr), MRC/CCP4 (.mrc, .map, .ccp4), Gaussian cube
+(.cube), VTK legacy (.vtk), VolPack .den (any may end in .gz), a raw file (--dims NXxNYxNZ --dtype
+u8|u16|i16|f32, x fastest), or --demo hydrogen:N | gyroid:N | sphere:N | torus:N. Levels: --level L
+(repeatable); a demo has a default. A volume too large for a board (send, --board) is downsampled
+to fit, with a note; --downsample N and --crop X0:X1,Y0:Y1,Z0:Z1 choose.
+'isoscope-sim COMMAND --help' lists every flag."
 )]
 struct Cli {
     #[command(subcommand)]
@@ -333,6 +336,44 @@ struct InputArgs {
     /// Slicing planes, comma-separated: xy, xz, yz.
     #[arg(long, default_value = "xy,xz,yz", value_delimiter = ',')]
     axes: Vec<String>,
+    #[command(flatten)]
+    fit: FitArgs,
+}
+
+/// How to make a volume smaller, for a board or by choice.
+#[derive(Args, Debug, Clone, Copy)]
+struct FitArgs {
+    /// Replace each block of N x N x N voxels (or NX x NY x NZ: `2,2,1`)
+    /// by its mean (integers rounded, in their type); samples short of a
+    /// whole block at an axis's end are left out. Without it (and
+    /// --crop), a volume a board cannot take (send, or --board) is
+    /// downsampled by the smallest factor that fits, with a note.
+    #[arg(long, value_name = "N|NX,NY,NZ")]
+    downsample: Option<isoscope_sim::fit::Factors>,
+    /// Keep only these half-open voxel ranges, from 0 (a bound left out is
+    /// the axis's start or end: `:,:,40:`); applied before --downsample.
+    #[arg(long, value_name = "X0:X1,Y0:Y1,Z0:Z1")]
+    crop: Option<isoscope_sim::fit::Crop>,
+}
+
+impl FitArgs {
+    fn options(&self) -> isoscope_sim::fit::FitOptions {
+        isoscope_sim::fit::FitOptions { crop: self.crop, downsample: self.downsample }
+    }
+}
+
+/// Fit `vol` as `args` say, and to `limits` when it goes to a board; the
+/// notes on standard error.
+fn fit_volume(
+    vol: LoadedVolume,
+    args: &FitArgs,
+    limits: Option<&isoscope_sim::fit::Limits>,
+) -> Result<LoadedVolume> {
+    let fitted = isoscope_sim::fit::fit(vol, &args.options(), limits)?;
+    for n in &fitted.notes {
+        eprintln!("isoscope-sim: note: {n}");
+    }
+    Ok(fitted.volume)
 }
 
 #[derive(Args, Debug, Clone, Copy)]
@@ -403,8 +444,10 @@ struct StatsArgs {
 
 #[derive(Args, Debug, Clone)]
 struct Source {
-    /// Volume file: a VolPack .den, or raw little-endian samples, x fastest
-    /// (a raw file needs --dims and --dtype).
+    /// Volume file: NIfTI-1 (.nii, .hdr), NRRD (.nrrd, .nhdr), MRC/CCP4
+    /// (.mrc, .map, .ccp4), Gaussian cube (.cube), VTK legacy (.vtk),
+    /// VolPack .den (any may end in .gz), or raw samples, x fastest (a raw
+    /// file needs --dims and --dtype).
     #[arg(conflicts_with = "demo")]
     input: Option<PathBuf>,
     /// Volume extents NXxNYxNZ (a 2D grid has NZ = 1).
@@ -621,6 +664,7 @@ fn contour(args: &ContourArgs) -> Result<()> {
     let (vol, demo) = load(&args.input.source)?;
     // An export says its levels: no suggested level for a file.
     let levels = levels_for(&args.input.levels, demo, None)?;
+    let vol = fit_volume(vol, &args.input.fit, None)?;
     let planes = planes(&args.input.axes)?;
     let threads = match args.threads {
         Some(0) => bail!("--threads must be at least 1"),
@@ -800,6 +844,8 @@ fn prepare(
     let (vol, demo) = load(&input.source)?;
     let levels = levels_for(&input.levels, demo, Some(&vol))?;
     let planes = planes(&input.axes)?;
+    let limits = board.board.map(|b| isoscope_sim::fit::Limits::of_board(&b));
+    let vol = fit_volume(vol, &input.fit, limits.as_ref())?;
     let every = match v.every {
         Some(0) => bail!("--every must be at least 1"),
         Some(n) => n,
@@ -900,7 +946,8 @@ fn wav(args: &WavArgs) -> Result<()> {
 }
 
 fn send(args: &SendArgs) -> Result<()> {
-    use isoscope_sim::link::{SendConfig, ViewSetting, WireVolume, open_port, send_volume};
+    use isoscope_sim::fit::Limits;
+    use isoscope_sim::link::{SendConfig, ViewSetting, WireVolume, connect, open_port};
     let (vol, demo) = load(&args.input.source)?;
     let levels = levels_for(&args.input.levels, demo, Some(&vol))?;
     let axes = scene::axes(&planes(&args.input.axes)?);
@@ -914,12 +961,21 @@ fn send(args: &SendArgs) -> Result<()> {
         fov_deg: args.perspective.unwrap_or(0.0),
         spin_deg_per_s: args.spin.unwrap_or(0.0),
     });
-    let wire = WireVolume::from_loaded(&vol)?;
-    if let Some(board) = args.board {
-        // What that board will show: the same engine with its memory.
+    // With --board the volume is fitted to that board and previewed before
+    // the port is opened; without, to what the board says it takes.
+    let mut vol = Some(vol);
+    let mut fitted = None;
+    if let Some(board) = args.board
+        && let Some(vol) = vol.take()
+    {
+        // The settings first, so that their errors say what they are.
         let mut preview = SceneConfig::board(board, levels.clone());
         preview.planes = planes(&args.input.axes)?;
         preview.every = usize::from(args.every);
+        preview.send()?;
+        let wire =
+            WireVolume::from_loaded(&fit_volume(vol, &args.input.fit, Some(&Limits::of_board(&board)))?)?;
+        // What that board will show: the same engine with its memory.
         if let Some(v) = view {
             let [yaw, pitch, roll] = v.angles;
             let projection = match v.perspective() {
@@ -928,8 +984,6 @@ fn send(args: &SendArgs) -> Result<()> {
             };
             preview.view = View { yaw, pitch, roll, projection, ..preview.view };
         }
-        // The settings first, so that their errors say what they are.
-        preview.send()?;
         let scene = scene::build(&wire, &preview)
             .with_context(|| format!("the {} board cannot take this volume", board.name))?;
         for r in scene.remarks() {
@@ -942,6 +996,7 @@ fn send(args: &SendArgs) -> Result<()> {
             scene.points,
             scene.fps()
         );
+        fitted = Some(wire);
     }
     let cfg = SendConfig {
         levels,
@@ -965,10 +1020,18 @@ fn send(args: &SendArgs) -> Result<()> {
         args.port.clone()
     };
     let (reader, writer) = open_port(&port, args.baud)?;
+    let link = connect(reader, writer)?;
+    let wire = match fitted {
+        Some(w) => w,
+        None => {
+            let vol = vol.context("the volume was fitted already")?;
+            WireVolume::from_loaded(&fit_volume(vol, &args.input.fit, Some(&Limits::of_info(link.board())))?)?
+        }
+    };
     let chunks_per_slice = wire.slice_bytes().div_ceil(cfg.chunk.max(1));
     let total = 2 + chunks_per_slice * usize::from(wire.dims[2]) + usize::from(view.is_some());
     let progress = Progress::new("sending frames", total);
-    let report = send_volume(reader, writer, &wire, &cfg, Some(&progress))?;
+    let report = link.send(&wire, &cfg, Some(&progress))?;
     eprintln!(
         "isoscope-sim: sent {}x{}x{} {:?} to {} ({:.1} KB/s, {:.1}% of the line rate)",
         wire.dims[0],

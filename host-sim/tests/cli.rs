@@ -746,8 +746,9 @@ fn big_endian_raw_files() {
 }
 
 /// `--board` shows what that board would: a note where it thins the
-/// surface, and a plain refusal of slices it cannot hold, before `send`
-/// opens the port.
+/// surface, a note where it downsamples a volume too large for it, and a
+/// plain refusal of slices it cannot hold at the `--downsample` given,
+/// before `send` opens the port.
 #[test]
 fn board_preset_says_what_the_board_cannot_hold() {
     let out = run(&["stats", "--demo", "gyroid:48", "--board", "f407"]);
@@ -760,6 +761,14 @@ fn board_preset_says_what_the_board_cannot_hold() {
     );
     let out = run(&["stats", "--demo", "gyroid:48"]);
     assert!(!text(&out.stderr).contains("note: the"), "{}", text(&out.stderr));
+    let out = run(&["stats", "--demo", "gyroid:100", "--board", "f407"]);
+    let err = text(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("a 100x100 slice of F32 is 40000 bytes: downsampling by 2")
+            && err.contains("2x2x2 block, 50x50x50 F32"),
+        "{err}"
+    );
     for cmd in ["render", "send"] {
         let out = run(&[
             cmd,
@@ -767,6 +776,8 @@ fn board_preset_says_what_the_board_cannot_hold() {
             "gyroid:100",
             "--board",
             "f407",
+            "--downsample",
+            "1",
             "--port",
             "tcp:127.0.0.1:1",
             "-o",
@@ -779,7 +790,10 @@ fn board_preset_says_what_the_board_cannot_hold() {
         assert!(!out.status.success());
         let err = text(&out.stderr);
         assert!(
-            err.contains("a 100x100 slice of F32 is 40000 bytes; the f407 board holds 32768"),
+            err.contains(
+                "the f407 board takes slices of at most 32768 bytes and 128 samples a side; \
+                 a 100x100x100 F32 volume does not fit (--downsample 2 fits)"
+            ),
             "{cmd}: {err}"
         );
         assert!(!err.contains("Connection refused"), "{cmd} tried the port: {err}");
