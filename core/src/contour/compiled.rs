@@ -78,14 +78,8 @@ pub fn program(code: DirectionCode, below: u8) -> Option<Program> {
 /// subgrid the table does not hold, or with a node at the level, `None`.
 #[inline(always)]
 pub fn program_for(sub: &Subgrid, level: f32) -> Option<Program> {
-    let v = sub.values();
-    let mut below = 0u8;
-    let mut at = false;
-    for (n, &x) in v.iter().enumerate() {
-        below |= u8::from(x <= level) << n;
-        at |= x == level;
-    }
-    if at { None } else { program(sub.code(), below) }
+    let (below, on) = sub.below(level);
+    if on { None } else { program(sub.code(), below) }
 }
 
 // The builder below runs at compile time only (for the statics): an index out
@@ -154,13 +148,7 @@ const fn build() -> Built {
                 continue;
             }
             let level = (lo + hi) * 0.5;
-            let values = sub.values();
-            let mut below = 0usize;
-            let mut n = 0;
-            while n < 5 {
-                below |= ((values[n] <= level) as usize) << n;
-                n += 1;
-            }
+            let below = sub.below(level).0 as usize;
             if b.row[code] == 0 {
                 b.row[code] = b.rows as u8;
                 b.rows += 1;

@@ -142,12 +142,7 @@ pub fn contour_subgrid<P, S: CommandSink<P>>(
             sent += 1;
             sink.command(li, c.map(|(x, y)| place(x, y)))
         };
-        let mut below = 0u8;
-        let mut on = false;
-        for (n, &v) in sub.values().iter().enumerate() {
-            below |= u8::from(v <= level) << n;
-            on |= v == level;
-        }
+        let (below, on) = sub.below(level);
         if !on
             && traversal == Traversal::Compiled
             && let Some(program) = compiled::program(code, below)

@@ -290,6 +290,21 @@ impl Subgrid {
         v[0] == v[1] && v[1] == v[2] && v[2] == v[3]
     }
 
+    /// Which nodes lie at or below `level` (bit `n` for node index `n`),
+    /// and whether one of them equals it.
+    #[inline(always)]
+    pub const fn below(&self, level: f32) -> (u8, bool) {
+        let (mut below, mut on) = (0u8, false);
+        let mut n = 0;
+        while n < 5 {
+            let v = self.at(n);
+            below |= ((v <= level) as u8) << n;
+            on |= v == level;
+            n += 1;
+        }
+        (below, on)
+    }
+
     /// The downhill direction of every edge.
     #[inline(always)]
     pub const fn code(&self) -> DirectionCode {

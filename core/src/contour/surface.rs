@@ -7,7 +7,7 @@
 
 use super::grid::{Plane, Planes, Volume};
 use super::pen::Placement;
-use super::sweep::{BLOCK, Scratch, Sweep, and_across, and_along, each_busy, lane};
+use super::sweep::{BLOCK, Scratch, Sweep, and_across, each_busy, lane};
 use super::trace::Traversal;
 use super::voxel::Voxel;
 use super::{ContourError, ContourStats, check_levels, contour_grid};
@@ -134,48 +134,40 @@ pub fn contour_slab<T: Voxel, S: SurfaceSink>(
                 let h1 = if right && up { lane(data, row(y + 1, z + 1) + x0, 1, n, b3) } else { &[] };
                 if xy && right {
                     sweep.classify(l1, c1);
-                    and_along(m, c0, c1, n - 1);
-                    let slice = SliceId { plane: Plane::XY, index: z };
-                    each_busy(m, n - 1, |k| {
-                        let (Some(&a), Some(&b), Some(&c), Some(&d)) =
-                            (l0.get(k), l0.get(k + 1), l1.get(k + 1), l1.get(k))
-                        else {
-                            return Ok(());
-                        };
-                        let place = |u, v| Plane::XY.to_voxel(fz, u, v);
-                        let at = Placement::new(x0 + k, y);
-                        sweep.cell(
-                            [a, b, c, d],
-                            at,
-                            &place,
-                            &mut SliceSink { sink: &mut *sink, slice },
+                    let place = |_, u, v| Plane::XY.to_voxel(fz, u, v);
+                    let mut to =
+                        SliceSink { sink: &mut *sink, slice: SliceId { plane: Plane::XY, index: z } };
+                    sweep
+                        .run_classed(
+                            l0,
+                            l1,
+                            [c0, c1],
+                            m,
+                            |k| Placement::new(x0 + k, y),
+                            place,
+                            &mut to,
                             &mut stats,
                         )
-                    })
-                    .map_err(ContourError::Sink)?;
+                        .map_err(ContourError::Sink)?;
                 }
                 if xz && up {
                     sweep.classify(h0, c2);
-                    and_along(m, c0, c2, n - 1);
-                    let slice = SliceId { plane: Plane::XZ, index: y };
                     let fy = y as f32;
-                    each_busy(m, n - 1, |k| {
-                        let (Some(&a), Some(&b), Some(&c), Some(&d)) =
-                            (l0.get(k), l0.get(k + 1), h0.get(k + 1), h0.get(k))
-                        else {
-                            return Ok(());
-                        };
-                        let place = |u, v| Plane::XZ.to_voxel(fy, u, v);
-                        let at = Placement::new(x0 + k, z);
-                        sweep.cell(
-                            [a, b, c, d],
-                            at,
-                            &place,
-                            &mut SliceSink { sink: &mut *sink, slice },
+                    let place = |_, u, v| Plane::XZ.to_voxel(fy, u, v);
+                    let mut to =
+                        SliceSink { sink: &mut *sink, slice: SliceId { plane: Plane::XZ, index: y } };
+                    sweep
+                        .run_classed(
+                            l0,
+                            h0,
+                            [c0, c2],
+                            m,
+                            |k| Placement::new(x0 + k, z),
+                            place,
+                            &mut to,
                             &mut stats,
                         )
-                    })
-                    .map_err(ContourError::Sink)?;
+                        .map_err(ContourError::Sink)?;
                 }
                 if yz && right && up {
                     if !xy {

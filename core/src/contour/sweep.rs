@@ -227,9 +227,28 @@ impl<'l> Sweep<'l> {
     ) -> Result<(), S::Error> {
         let samples = lower.len().min(upper.len()).min(BLOCK + 1);
         let (lower, upper) = (lower.get(..samples).unwrap_or(&[]), upper.get(..samples).unwrap_or(&[]));
-        let cells = samples.saturating_sub(1);
         self.classify(lower, lo);
         self.classify(upper, up);
+        self.run_classed(lower, upper, [lo, up], m, at, place, sink, stats)
+    }
+
+    /// [`Sweep::run_rows`] for rows whose classes `lo` and `up` are already
+    /// known (a slab classes a row once for several planes); `m` is
+    /// scratch.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn run_classed<P, S: CommandSink<P>>(
+        &self,
+        lower: &[f32],
+        upper: &[f32],
+        [lo, up]: [&Classes; 2],
+        m: &mut Classes,
+        at: impl Fn(usize) -> Placement,
+        place: impl Fn(usize, f32, f32) -> P,
+        sink: &mut S,
+        stats: &mut ContourStats,
+    ) -> Result<(), S::Error> {
+        let cells = lower.len().min(upper.len()).min(BLOCK + 1).saturating_sub(1);
         and_along(m, lo, up, cells);
         each_busy(m, cells, |k| {
             let (Some(&a), Some(&b), Some(&c), Some(&d)) =

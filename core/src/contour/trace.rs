@@ -186,12 +186,7 @@ pub fn visit(
 pub const fn trace(sub: &Subgrid, tpl: &Template, level: f32, traversal: Traversal) -> Trace {
     let mut out = Trace::EMPTY;
     let entries = tpl.entries();
-    let mut below = 0u8;
-    let mut n = 0;
-    while n < 5 {
-        below |= ((sub.at(n) <= level) as u8) << n;
-        n += 1;
-    }
+    let (below, _) = sub.below(level);
     // Entries whose tree edge contains the level, plus roots at the level.
     let mut todo = tpl.crossing_entries(below);
     let mut t = 0;
