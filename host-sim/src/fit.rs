@@ -274,8 +274,15 @@ pub fn convert(samples: &Samples, to: Dtype) -> Samples {
     }
 }
 
-/// Check that `samples` are as many as `dims` says.
-fn check_len(len: usize, dims: Dims) -> Result<()> {
+/// Check that `vol`'s samples are as many as its dims say.
+fn check_len(vol: &LoadedVolume) -> Result<()> {
+    let len = match &vol.samples {
+        Samples::U8(s) => s.len(),
+        Samples::U16(s) => s.len(),
+        Samples::I16(s) => s.len(),
+        Samples::F32(s) => s.len(),
+    };
+    let dims = vol.dims;
     if dims.count() != Some(len) {
         bail!("the volume holds {len} samples, not {}x{}x{}", dims.0, dims.1, dims.2);
     }
@@ -301,23 +308,12 @@ pub fn crop(vol: &LoadedVolume, crop: &Crop) -> Result<LoadedVolume> {
         out
     }
     let r = [xr.clone(), yr.clone(), zr.clone()];
+    check_len(vol)?;
     let samples = match &vol.samples {
-        Samples::U8(s) => {
-            check_len(s.len(), vol.dims)?;
-            Samples::U8(cut(s, nx, ny, &r))
-        }
-        Samples::U16(s) => {
-            check_len(s.len(), vol.dims)?;
-            Samples::U16(cut(s, nx, ny, &r))
-        }
-        Samples::I16(s) => {
-            check_len(s.len(), vol.dims)?;
-            Samples::I16(cut(s, nx, ny, &r))
-        }
-        Samples::F32(s) => {
-            check_len(s.len(), vol.dims)?;
-            Samples::F32(cut(s, nx, ny, &r))
-        }
+        Samples::U8(s) => Samples::U8(cut(s, nx, ny, &r)),
+        Samples::U16(s) => Samples::U16(cut(s, nx, ny, &r)),
+        Samples::I16(s) => Samples::I16(cut(s, nx, ny, &r)),
+        Samples::F32(s) => Samples::F32(cut(s, nx, ny, &r)),
     };
     Ok(LoadedVolume { dims: Dims(xr.len(), yr.len(), zr.len()), samples, spacing: vol.spacing })
 }
@@ -378,23 +374,12 @@ pub fn downsample(vol: &LoadedVolume, f: Factors) -> Result<LoadedVolume> {
         }
         res
     }
+    check_len(vol)?;
     let samples = match &vol.samples {
-        Samples::U8(s) => {
-            check_len(s.len(), vol.dims)?;
-            Samples::U8(mean(s, n, f.0, out, f64::from, |m| m.round() as u8))
-        }
-        Samples::U16(s) => {
-            check_len(s.len(), vol.dims)?;
-            Samples::U16(mean(s, n, f.0, out, f64::from, |m| m.round() as u16))
-        }
-        Samples::I16(s) => {
-            check_len(s.len(), vol.dims)?;
-            Samples::I16(mean(s, n, f.0, out, f64::from, |m| m.round() as i16))
-        }
-        Samples::F32(s) => {
-            check_len(s.len(), vol.dims)?;
-            Samples::F32(mean(s, n, f.0, out, f64::from, |m| m as f32))
-        }
+        Samples::U8(s) => Samples::U8(mean(s, n, f.0, out, f64::from, |m| m.round() as u8)),
+        Samples::U16(s) => Samples::U16(mean(s, n, f.0, out, f64::from, |m| m.round() as u16)),
+        Samples::I16(s) => Samples::I16(mean(s, n, f.0, out, f64::from, |m| m.round() as i16)),
+        Samples::F32(s) => Samples::F32(mean(s, n, f.0, out, f64::from, |m| m as f32)),
     };
     let spacing = [0, 1, 2].map(|i| vol.spacing[i] * f.0[i] as f32);
     Ok(LoadedVolume { dims: out, samples, spacing })

@@ -9,10 +9,12 @@
 //! end, could not allocate, and would not give the error these tests ask
 //! for. Each must also answer within [`SECONDS`].
 
+mod common;
+use common::real_data;
 use flate2::Compression;
 use flate2::write::GzEncoder;
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
@@ -291,22 +293,12 @@ fn a_volume_over_the_limit_is_refused_before_reading() {
     );
 }
 
-/// A cached real data file (`scripts/fetch-data`); a missing one fails.
-fn real_data(name: &str) -> String {
-    let dir = std::env::var_os("ISOSCOPE_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/isoscope-data"));
-    let path = dir.join(name);
-    assert!(path.is_file(), "{} is missing: run scripts/fetch-data", path.display());
-    path.to_str().unwrap().to_owned()
-}
-
 /// `--max-volume-mb` on every command that reads a volume: a real file
 /// over it is refused, raising it lets the file through.
 #[test]
 fn max_volume_mb_refuses_and_admits_a_real_file() {
     // 128x128x84 int16: 2752512 bytes, 2.6 MiB.
-    let path = real_data("brainsmall_gz.nrrd");
+    let path = real_data("brainsmall_gz.nrrd").to_string_lossy().into_owned();
     let over = ["the volume's 128x128x84 int16 samples take 2752512 bytes (2.6 MiB)", "limit of 2 MiB"];
     refused(&[&path, "--max-volume-mb", "2"], &[&[path.as_str()][..], &over[..]].concat());
     assert!(loaded(&[&path, "--max-volume-mb", "3"]).contains("dims=128x128x84"));
@@ -318,7 +310,7 @@ fn max_volume_mb_refuses_and_admits_a_real_file() {
         assert!(!out.status.success() && stderr.contains(over[0]), "{args:?}: {stderr}");
     }
     // Raw files and .den files too.
-    let den = real_data("brainsmall.den");
+    let den = real_data("brainsmall.den").to_string_lossy().into_owned();
     refused(
         &[&den, "--max-volume-mb", "1"],
         &[&den, "take 1376256 bytes (1.3 MiB), more than the limit of 1 MiB"],

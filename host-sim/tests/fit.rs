@@ -3,11 +3,12 @@
 //! the MNI152 template's size (197x233x189 u8, made here), sent to a
 //! virtual f407 board, and on a real file too wide for the board.
 
+mod common;
+use common::real_data;
 use isoscope_core::engine::Board;
 use isoscope_sim::fit::{self, Crop, Factors, FitOptions, Limits};
 use isoscope_sim::volume::{Dims, Dtype, LoadedVolume, Samples};
 use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
 fn bin() -> &'static str {
@@ -183,16 +184,6 @@ fn send_fits_an_mni152_sized_volume_to_the_virtual_board() {
         .find_map(|l| l.strip_prefix("board_points=")?.parse().ok())
         .unwrap_or_else(|| panic!("no board_points= in {text}"));
     assert!(points > 100, "{text}");
-}
-
-/// A cached real data file (`scripts/fetch-data`); a missing one fails.
-fn real_data(name: &str) -> PathBuf {
-    let dir = std::env::var_os("ISOSCOPE_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/isoscope-data"));
-    let path = dir.join(name);
-    assert!(path.is_file(), "{} is missing: run scripts/fetch-data", path.display());
-    path
 }
 
 /// ITK's 221x257 proton density slice is wider than the f407's rows: the

@@ -6,24 +6,15 @@
 //! larger than the board holds, and a perspective view; all with the
 //! STM32F407's memory (`--board f407`), one also with the host's.
 
+mod common;
+use common::real_data;
 use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_isoscope-sim")
-}
-
-/// A cached real data file (`scripts/fetch-data`, which `scripts/test`
-/// runs first); a missing one fails the test.
-fn real_data(name: &str) -> PathBuf {
-    let dir = std::env::var_os("ISOSCOPE_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/isoscope-data"));
-    let path = dir.join(name);
-    assert!(path.is_file(), "{} is missing: run scripts/fetch-data", path.display());
-    path
 }
 
 /// A scratch directory, removed at the end.
