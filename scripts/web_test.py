@@ -258,6 +258,16 @@ def check_scene(b, name, got, sim_flags, sim, tmp, tag, golden=None):
         compare(name, canvas, read_png(golden), f"the golden {golden.name}", golden=True)
 
 
+def open_file(b, base, path):
+    """A fresh page, then `path` through its file input (as a user picks it)."""
+    b.send("Page.navigate", {"url": f"{base}?size={SIZE}"})
+    b.wait(READY, "the page to show its first demo")
+    b.send("DOM.enable")
+    root = b.send("DOM.getDocument")["root"]["nodeId"]
+    node = b.send("DOM.querySelector", {"nodeId": root, "selector": "#file"})["nodeId"]
+    b.send("DOM.setFileInputFiles", {"nodeId": node, "files": [str(path)]})
+
+
 def main():
     if len(sys.argv) < 2:
         fail("usage: web_test.py SIM_BINARY [DATA_DIR]")
@@ -304,12 +314,7 @@ def main():
                         "dragged")
             if data and (data / FILE_SCENE).exists():
                 path = data / FILE_SCENE
-                b.send("Page.navigate", {"url": f"{base}?size={SIZE}"})
-                b.wait(READY, "the page to show its first demo")
-                b.send("DOM.enable")
-                root = b.send("DOM.getDocument")["root"]["nodeId"]
-                node = b.send("DOM.querySelector", {"nodeId": root, "selector": "#file"})["nodeId"]
-                b.send("DOM.setFileInputFiles", {"nodeId": node, "files": [str(path)]})
+                open_file(b, base, path)
                 b.wait(f"(() => {{ const i = window.isoscope.info(); return window.isoscope.error !== null || "
                        f"(i && i.name === {json.dumps(FILE_SCENE)} && window.isoscope.frames >= 2); }})()",
                        f"{FILE_SCENE} to load")
@@ -319,12 +324,7 @@ def main():
             # A bad file: a clear error in the page, no crash.
             bad = tmp / "broken.nrrd"
             bad.write_bytes(b"NRRD0004\ntype: float\ndimension: 3\nsizes: 4 4 4\nendian: little\nencoding: raw\n\n\x00\x00")
-            b.send("Page.navigate", {"url": f"{base}?size={SIZE}"})
-            b.wait(READY, "the page to show its first demo")
-            b.send("DOM.enable")
-            root = b.send("DOM.getDocument")["root"]["nodeId"]
-            node = b.send("DOM.querySelector", {"nodeId": root, "selector": "#file"})["nodeId"]
-            b.send("DOM.setFileInputFiles", {"nodeId": node, "files": [str(bad)]})
+            open_file(b, base, bad)
             b.wait("window.isoscope.error !== null", "the page to report the broken file")
             shown = b.eval("document.getElementById('error').hidden ? '' : "
                            "document.getElementById('error').textContent")
