@@ -494,6 +494,43 @@ class Tally:
             cycles[a] += c
 
 
+class _Adder:
+    """A counter that keeps nothing: `self[k] += v` hands (k, v) to a function."""
+
+    def __init__(self, add):
+        self._add = add
+
+    def __getitem__(self, key):
+        return 0
+
+    def __setitem__(self, key, value):
+        self._add(key, value)
+
+
+class Clock:
+    """A sink like a Tally that keeps only a running total of estimated
+    cycles and instructions, as blocks are settled: the time so far, for
+    the gaps between events (a block is settled when the next one starts,
+    so the clock trails by at most one block)."""
+
+    def __init__(self, model):
+        self.cycles = 0
+        self.instr = 0
+        self.flash = 0
+        self.exc = 0
+
+        def execs(key, count):
+            k, n = key
+            self.cycles += count * model.static(k, n).cycles
+            self.instr += count * n
+
+        def extra(_addr, cycles):
+            self.cycles += cycles
+
+        self.execs = _Adder(execs)
+        self.extra = _Adder(extra)
+
+
 class Model:
     """Follows a QEMU log's block executions and charges their cycles to Tallies."""
 

@@ -20,7 +20,7 @@
 //! - d. the statistics match the input (lengths, counts, samples);
 //! - e. the mock DAC takes exactly the in-range samples.
 
-use isoscope_core::beam::replay::Replay;
+use isoscope_core::beam::replay::{Kept, Replay};
 use isoscope_core::beam::{BeamConfig, FrameStats, MIN_LIT_STEP, Park, Scheduler, frame_stats, park_samples};
 use isoscope_core::command::{Command, CommandSink, Point2};
 use isoscope_core::contour::contour_grid;
@@ -389,8 +389,9 @@ fn record<'m>(
     cfg: &BeamConfig,
     chunks: &[usize],
     mem: &'m mut [u8],
+    kept: &'m mut Kept,
 ) -> (Vec<Sample>, FrameStats, Replay<'m>) {
-    let mut replay = Replay::new(mem);
+    let mut replay = Replay::new(mem, kept);
     let mut sch = Scheduler::new(cmds.iter().copied(), cfg);
     let mut rec = replay.record(9).expect("memory");
     let mut got = Vec::new();
@@ -622,7 +623,8 @@ proptest! {
         prop_assume!(bound <= 200_000);
         let want: Vec<Sample> = Scheduler::new(cmds.iter().copied(), &cfg).collect();
         let mut mem = vec![0u8; 8 * want.len() + 8];
-        let (got, stats, replay) = record(&cmds, &cfg, &chunks, &mut mem);
+        let mut kept = Kept::new();
+        let (got, stats, replay) = record(&cmds, &cfg, &chunks, &mut mem, &mut kept);
         prop_assert_eq!(&got, &want);
         for _ in 0..2 {
             let mut player = replay.play(9).expect("kept");
@@ -642,7 +644,8 @@ proptest! {
             return Ok(());
         }
         let mut mem = vec![0u8; need - 1];
-        let (got, _, replay) = record(&cmds, &cfg, &chunks, &mut mem);
+        let mut kept = Kept::new();
+        let (got, _, replay) = record(&cmds, &cfg, &chunks, &mut mem, &mut kept);
         prop_assert_eq!(&got, &want);
         prop_assert!(replay.play(9).is_none());
         prop_assert!(replay.too_long(9));

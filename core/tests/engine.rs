@@ -10,6 +10,7 @@ use isoscope_core::demo::Demo;
 use isoscope_core::engine::{
     AbortReason, Buffers, Engine, EngineConfig, Event, Geometry, Packed, StaticBuffers,
 };
+use isoscope_core::output::SampleSource;
 use isoscope_core::path::Stride;
 use isoscope_core::wire::{
     AXIS_X, AXIS_Y, AXIS_Z, DeviceState, FrameDecoder, Levels, MAX_CHUNK, Message, NackCode,
@@ -1497,10 +1498,13 @@ fn a_frame_too_long_for_the_memory_plays_live_every_time() {
 }
 
 #[test]
-fn hydrogen_32_orders_alike_in_the_scratch_a_recording_would_leave() {
+fn hydrogen_32_orders_alike_in_the_head_a_recording_leaves() {
     // The board's picture: pieces in the back and spilled into the slice
-    // memory, stitched beside the spill, ordered in all 65,536 bytes of the
-    // slice memory (u32 words).
+    // memory, stitched beside the spill, then ordered in the head of the
+    // slice memory that a recording's tail leaves (28,672 of 65,536 bytes:
+    // too little for u32 words, 33,300 bytes at least for the 7,672 points
+    // in 103 polylines, so in u16 words), whether a recording is kept or
+    // not.
     let v = hydrogen32();
     let mut board = Box::new(Firmware::new());
     let mut a = Engine::new(EngineConfig::default(), board.buffers()).unwrap();
@@ -1510,19 +1514,16 @@ fn hydrogen_32_orders_alike_in_the_scratch_a_recording_would_leave() {
     let sa = a.chain_stats();
     assert!(sa.ordered, "{sa:?}");
     assert_eq!((sa.points_out, sa.polylines), (7672, 4), "{sa:?}");
-    // The slice memory less the old picture's 34,664-byte recording, or
-    // less a 36,864-byte tail kept for one, and a back that holds every
-    // piece (no spill). Stitched alike, then ordered in what is left: too
-    // little for u32 words (33,300 bytes at least for the 7,672 points in
-    // 103 polylines), so in u16 words.
-    for slices in [65_536 - 34_664, 65_536 - 36_864] {
-        let mut tail = Mem::sized(slices, 128, [8192, 16384], 0);
-        let mut b = Engine::new(EngineConfig::default(), tail.buffers()).unwrap();
-        b.feed(&Host::new().volume(&v), 0);
-        assert!(b.update(0));
-        assert_eq!(sa, b.chain_stats(), "{slices} bytes");
-        assert!(picture(&a) == picture(&b), "{slices} bytes: the same picture, bit for bit");
-    }
+    assert_eq!(isoscope_core::engine::replay_tail(65_536), 36_864);
+    // The same as in all 65,536 bytes (u32 words): a back that holds every
+    // piece (no spill), stitched alike, then ordered in 65,536 bytes of
+    // extra scratch.
+    let mut host = Mem::sized(65_536, 128, [8192, 16384], 65_536);
+    let mut b = Engine::new(EngineConfig::default(), host.buffers()).unwrap();
+    b.feed(&Host::new().volume(&v), 0);
+    assert!(b.update(0));
+    assert_eq!(sa, b.chain_stats());
+    assert!(picture(&a) == picture(&b), "the same picture, bit for bit");
 }
 
 #[test]
@@ -1536,4 +1537,119 @@ fn the_firmware_memory_keeps_hydrogen_32() {
     let want: Vec<_> = e.frame().collect();
     assert_eq!(board_frame(&mut e), (want.clone(), false));
     assert_eq!(board_frame(&mut e), (want, true), "hydrogen 32^3's frame fits the board's slice memory");
+}
+
+/// Play frames as a board does while `bytes` arrive: between refills of
+/// 512 samples, some rows of a completed slice contoured or up to 256
+/// bytes fed; [`Engine::update`] at each frame boundary until every byte
+/// is taken and contoured (the commit is left to the caller). Returns each
+/// frame's samples and whether it was replayed.
+fn board_receives(
+    e: &mut Engine<'_>,
+    bytes: &[u8],
+    t0: u32,
+) -> Vec<(Vec<isoscope_core::output::Sample>, bool)> {
+    let mut rest = bytes;
+    let mut frames = Vec::new();
+    for t in t0.. {
+        let mut got = Vec::new();
+        let replayed = {
+            let (mut link, mut screen) = e.split();
+            let mut frame = screen.frame();
+            loop {
+                let n = frame.fill_with(512, |s| got.push(s));
+                if link.busy() {
+                    link.contour(2000);
+                } else if !rest.is_empty() {
+                    let k = link.feed(&rest[..256.min(rest.len())], t);
+                    rest = &rest[k..];
+                }
+                if n < 512 {
+                    break;
+                }
+            }
+            frame.is_replay()
+        };
+        frames.push((got, replayed));
+        if rest.is_empty() && !e.split().0.busy() {
+            break;
+        }
+        assert!(frames.len() < 10_000, "the volume never went in");
+        assert!(!e.update(t), "no new picture while the volume arrives");
+    }
+    frames
+}
+
+#[test]
+fn a_still_picture_plays_on_from_the_tail_through_a_volume_and_its_commit() {
+    // The board's memory and settings: contouring deferred, frames replayed.
+    let cfg = EngineConfig { defer_contouring: true, ..EngineConfig::default() };
+    // A picture whose recording fits the tail (36,864 bytes).
+    let old = Vol::demo(Demo::Torus, 12, SampleType::U8);
+    // Its slices fit the head and its pieces the back; or (hydrogen 32^3)
+    // its pieces spill, and the stream takes all of the memory back.
+    for (new, plays) in [(Vol::demo(Demo::Sphere, 12, SampleType::U8), true), (hydrogen32(), false)] {
+        let mut board = Box::new(Firmware::new());
+        let mut e = Engine::new(cfg, board.buffers()).unwrap();
+        e.replay_frames(true);
+        let mut host = Host::new();
+        feed_deferring(&mut e, &host.volume(&old), 256, 2000);
+        assert!(e.update(0));
+        let (first, replayed) = board_frame(&mut e);
+        assert!(!replayed);
+        assert_eq!(board_frame(&mut e), (first.clone(), true));
+
+        // The first command waits (the memory is all the replay's); at the
+        // next frame boundary the head comes to the stream, the tail keeps
+        // the recording.
+        let begin = host.begin(&new);
+        answers(&mut e);
+        e.feed(&begin, 1);
+        assert_eq!(nacks(&answers(&mut e)), [NackCode::Busy]);
+        assert!(!e.update(2));
+        let (again, replayed) = board_frame(&mut e);
+        assert!(again == first && replayed, "from the tail");
+        let bytes = [begin, host.slices(&new, MAX_CHUNK).concat(), host.end()].concat();
+        let frames = board_receives(&mut e, &bytes, 3);
+        assert_eq!(nacks(&answers(&mut e)), []);
+        assert!(frames.iter().all(|(s, _)| *s == first), "the old picture plays on");
+        let replayed = frames.iter().filter(|(_, r)| *r).count();
+        if plays {
+            let flags: Vec<_> = frames.iter().map(|f| f.1).collect();
+            assert_eq!(replayed, frames.len(), "every frame from the tail: {flags:?}");
+        } else {
+            assert!(replayed < frames.len(), "live once the spill took the tail");
+        }
+        assert_eq!(e.commit_parks(), !plays);
+
+        // The commit: the old frame plays on, over and over, then to its end.
+        let mut during = Vec::new();
+        let mut calls = 0;
+        assert!(e.update_playing(4, &mut |p| {
+            calls += 1;
+            p.fill_with(300, |s| during.push(s));
+        }));
+        if let Some(p) = e.unfinished() {
+            during.extend(p);
+        }
+        assert!(e.unfinished().is_none(), "taken once");
+        if plays {
+            assert!(calls > 1, "{calls} polls");
+            assert!(during.len() >= first.len() && during.len() % first.len() == 0, "{}", during.len());
+            assert!(during.chunks(first.len()).all(|f| f == first), "whole frames of the old picture");
+        } else {
+            assert_eq!((calls, during.len()), (0, 0), "nothing to play: the beam waits");
+        }
+
+        // The new picture is the one a board with nothing recorded draws.
+        let mut fresh = Box::new(Firmware::new());
+        let mut f = Engine::new(cfg, fresh.buffers()).unwrap();
+        feed_deferring(&mut f, &Host::new().volume(&new), 256, 2000);
+        assert!(f.update(0));
+        assert_eq!(e.chain_stats(), f.chain_stats());
+        assert!(picture(&e) == picture(&f), "the same picture, bit for bit");
+        let want: Vec<_> = f.frame().collect();
+        assert_eq!(board_frame(&mut e), (want.clone(), false));
+        assert_eq!(board_frame(&mut e), (want, true), "and it is replayed in turn");
+    }
 }

@@ -785,3 +785,29 @@ fn check_shared_edges(r: &Run) -> Result<(), TestCaseError> {
     }
     Ok(())
 }
+
+/// No subgrid yields more than [`MAX_COMMANDS_A_CELL`] commands at one
+/// level, by any traversal: every subgrid of corners in `0..=6`, at every
+/// level on a quarter step (so nodes at the level, centre included, and
+/// levels between them). The engine sizes a row's room by it. Eight are
+/// reached: the bound is the least that holds.
+#[test]
+fn no_subgrid_yields_more_than_max_commands_a_cell_at_a_level() {
+    use isoscope_core::command::CountingSink;
+    use isoscope_core::contour::MAX_COMMANDS_A_CELL;
+    let mut most = 0;
+    for t in [Traversal::Compiled, Traversal::Corrected, Traversal::Literal] {
+        for code in 0..7u32.pow(4) {
+            let c = |k: u32| ((code / 7u32.pow(k)) % 7) as f32;
+            let sub = Subgrid::new(c(0), c(1), c(2), c(3)).unwrap();
+            for q in 0..=24 {
+                let mut n = CountingSink::default();
+                contour_subgrid(&sub, Placement::new(0, 0), &[q as f32 / 4.0], t, &Point2::new, &mut n)
+                    .unwrap();
+                assert!(n.total() as usize <= MAX_COMMANDS_A_CELL, "{t:?} {code} {q}: {}", n.total());
+                most = most.max(n.total() as usize);
+            }
+        }
+    }
+    assert_eq!(most, MAX_COMMANDS_A_CELL);
+}

@@ -37,7 +37,7 @@ mod stack;
 
 use board::Filled;
 use cortex_m_rt::{ExceptionFrame, entry, exception};
-use isoscope_core::engine::{Engine, Event, Link};
+use isoscope_core::engine::{Engine, Link};
 use isoscope_core::wire::DeviceState;
 use panic_probe as _;
 use serial::{Rx, Tx};
@@ -125,17 +125,11 @@ fn boot(engine: &mut Engine<'_>) {
     log_events(engine);
 }
 
-/// Log the engine's events. Returns whether one of them makes the next
-/// `update` long: a new volume's commit (stitching and ordering). A new
-/// view or beam only fits the view there (the board counts the frame as
-/// it plays it), well within a half, so the beam plays on.
-fn log_events(engine: &mut Engine<'_>) -> bool {
-    let mut commit = false;
+/// Log the engine's events.
+fn log_events(engine: &mut Engine<'_>) {
     while let Some(ev) = engine.next_event() {
         defmt::info!("engine t={}ms: {}", clock::now_ms(), ev);
-        commit |= matches!(ev, Event::Committed { .. });
     }
-    commit
 }
 
 /// Move the engine's answers into the transmit ring (as many as fit; the
@@ -308,9 +302,12 @@ fn run(board: board::Board, engine: &mut Engine<'static>) -> ! {
     defmt::info!("isoscope: showing the picture; listening on USART2");
     loop {
         // A frame boundary: what the link changed becomes the picture. A
-        // commit takes long (docs/board-refresh.md): the beam waits parked
-        // and blanked meanwhile.
-        let hold = log_events(engine);
+        // commit takes long (docs/board-refresh.md): the picture on screen
+        // plays on from its recording meanwhile, refilled from inside the
+        // commit; or, with no recording to play (or a commit that needs
+        // all of the memory), the beam waits parked and blanked.
+        log_events(engine);
+        let hold = engine.commit_parks();
         if hold && out.hold().is_err() {
             board::fault();
         }
@@ -320,7 +317,24 @@ fn run(board: board::Board, engine: &mut Engine<'static>) -> ! {
         engine.set_playback_rate(rate);
         report.rate(rate, engine.refresh_hz());
         let t0 = clock::cycles();
-        let redrawn = engine.update(clock::now_ms());
+        let redrawn = engine.update_playing(clock::now_ms(), &mut |frame| {
+            // A free half, if any (never waiting for one).
+            if out.ready() && out.fill_from(frame).is_err() {
+                board::fault();
+            }
+            watchdog.feed();
+        });
+        // The old frame to its end: the new picture starts on a frame
+        // boundary.
+        if let Some(mut rest) = engine.unfinished() {
+            loop {
+                match out.fill_from(&mut rest) {
+                    Ok(Filled::Half) => watchdog.feed(),
+                    Ok(Filled::FrameEnd) => break,
+                    Err(_) => board::fault(),
+                }
+            }
+        }
         if redrawn {
             timing.update = timing.update.max(clock::cycles().wrapping_sub(t0));
         }

@@ -14,7 +14,7 @@ use crate::board::{HostBuffers, InProcess, Loaded, Refused, check_levels, host_c
 use crate::link::{SendConfig, WireVolume};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
-use isoscope_core::beam::replay::Replay;
+use isoscope_core::beam::replay::{Kept, Replay};
 use isoscope_core::beam::{BeamConfig, FrameStats};
 use isoscope_core::command::Command;
 use isoscope_core::contour::grid::Plane;
@@ -261,7 +261,8 @@ pub fn scene_of(board: &InProcess<'_>, capacity: Capacity, cfg: &SceneConfig) ->
 fn replay_bytes(mut frame: impl SampleSource, samples: usize) -> usize {
     // A repeat run, the longest a sample takes, is 8 bytes.
     let mut mem = vec![0u8; 8 * samples + 8];
-    let mut replay = Replay::new(&mut mem);
+    let mut kept = Kept::new();
+    let mut replay = Replay::new(&mut mem, &mut kept);
     let Some(mut rec) = replay.record(0) else { return 0 };
     rec.fill_with(&mut frame, usize::MAX, |_| {});
     rec.finish(FrameStats::default());

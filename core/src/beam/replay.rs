@@ -27,7 +27,7 @@
 //! (the recording is tried once a picture).
 //!
 //! ```
-//! use isoscope_core::beam::replay::Replay;
+//! use isoscope_core::beam::replay::{Kept, Replay};
 //! use isoscope_core::output::{Beam, Sample, SampleSource, Samples};
 //!
 //! let frame = [
@@ -37,7 +37,8 @@
 //!     Sample::new(134, 104, Beam::On),
 //! ];
 //! let mut mem = [0u8; 64];
-//! let mut replay = Replay::new(&mut mem);
+//! let mut kept = Kept::new();
+//! let mut replay = Replay::new(&mut mem, &mut kept);
 //! let mut played = Vec::new();
 //! let mut live = Samples(frame.iter().copied());
 //! let mut rec = replay.record(7).unwrap();
@@ -67,37 +68,53 @@ const SHORT_DWELL: usize = 3;
 /// A picture's frame kept in borrowed memory, to play again. See the
 /// [module docs](self).
 ///
-/// The memory is lent for as long as it is idle and taken back
-/// ([`Replay::take`]) when it is needed again; the frame is the picture
+/// The memory is lent for as long as it is idle, and what it holds is
+/// kept apart from it ([`Kept`]), so that the owner of the memory may lend
+/// it again whole or in part, borrow after borrow. The frame is the picture
 /// that a key names (an engine's generation), so a recording of an older
 /// picture is never played for a newer one.
 #[derive(Debug)]
 pub struct Replay<'m> {
     mem: &'m mut [u8],
+    kept: &'m mut Kept,
+}
+
+/// What a [`Replay`]'s memory holds, kept between the borrows of that
+/// memory.
+///
+/// A recording is written at the start of the memory lent. With a tail
+/// ([`Kept::with_tail`]), a finished recording that fits it is moved to the
+/// memory's last `tail` bytes, so that it stays playable while only those
+/// are lent (the rest of the memory then free for other work).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Kept {
     held: Held,
+    tail: usize,
 }
 
 /// What a [`Replay`]'s memory holds.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 enum Held {
     /// Nothing (or a recording never finished).
+    #[default]
     Nothing,
-    /// The frame of picture `key`: the first `len` bytes of the memory, and
-    /// the frame's statistics.
-    Frame { key: u32, len: usize, stats: FrameStats },
+    /// The frame of picture `key`: `len` bytes that start `from_end` bytes
+    /// before the end of the memory, and the frame's statistics.
+    Frame { key: u32, from_end: usize, len: usize, stats: FrameStats },
     /// Picture `key`'s frame did not fit.
     TooLong { key: u32 },
 }
 
-impl<'m> Replay<'m> {
-    /// A replay over `mem` (any size; nothing fits in none).
-    pub const fn new(mem: &'m mut [u8]) -> Self {
-        Self { mem, held: Held::Nothing }
+impl Kept {
+    /// Nothing kept; recordings stay where they are written.
+    pub const fn new() -> Self {
+        Self { held: Held::Nothing, tail: 0 }
     }
 
-    /// Bytes of memory.
-    pub fn capacity(&self) -> usize {
-        self.mem.len()
+    /// Nothing kept; a finished recording of at most `tail` bytes is moved
+    /// to the memory's last `tail` bytes.
+    pub const fn with_tail(tail: usize) -> Self {
+        Self { held: Held::Nothing, tail }
     }
 
     /// Bytes of the recording held (0 without one).
@@ -113,31 +130,59 @@ impl<'m> Replay<'m> {
         !matches!(self.held, Held::Frame { .. })
     }
 
-    /// Take the memory back: the replay is left holding nothing, in none.
-    pub fn take(&mut self) -> &'m mut [u8] {
+    /// Whether a recording is held in the memory's tail
+    /// ([`Kept::with_tail`]): playable from those bytes alone.
+    pub fn in_tail(&self) -> bool {
+        matches!(self.held, Held::Frame { from_end, .. } if self.tail > 0 && from_end <= self.tail)
+    }
+
+    /// The tail's bytes ([`Kept::with_tail`]).
+    pub fn tail(&self) -> usize {
+        self.tail
+    }
+
+    /// Forget the recording (its memory is written over).
+    pub fn clear(&mut self) {
         self.held = Held::Nothing;
-        core::mem::take(&mut self.mem)
+    }
+}
+
+impl<'m> Replay<'m> {
+    /// A replay over `mem` (any size; nothing fits in none), holding what
+    /// `kept` says.
+    pub fn new(mem: &'m mut [u8], kept: &'m mut Kept) -> Self {
+        Self { mem, kept }
+    }
+
+    /// Bytes of memory.
+    pub fn capacity(&self) -> usize {
+        self.mem.len()
+    }
+
+    /// Bytes of the recording held (0 without one).
+    pub fn len(&self) -> usize {
+        self.kept.len()
+    }
+
+    /// Whether no recording is held.
+    pub fn is_empty(&self) -> bool {
+        self.kept.is_empty()
     }
 
     /// Whether picture `key`'s frame is held, to play.
     pub fn holds(&self, key: u32) -> bool {
-        matches!(self.held, Held::Frame { key: k, .. } if k == key)
+        matches!(self.kept.held, Held::Frame { key: k, .. } if k == key)
     }
 
     /// Whether picture `key`'s frame was found too long for the memory.
     pub fn too_long(&self, key: u32) -> bool {
-        self.held == Held::TooLong { key }
+        self.kept.held == Held::TooLong { key }
     }
 
-    /// Play picture `key`'s frame, if it is the one held.
+    /// Play picture `key`'s frame, if it is the one held (and lies in the
+    /// memory lent).
     pub fn play(&self, key: u32) -> Option<Player<'_>> {
-        match self.held {
-            Held::Frame { key: k, len, stats } if k == key => {
-                let rest = self.mem.get(..len)?;
-                Some(Player { rest, x: 0, y: 0, run: Run::Done, stats })
-            }
-            _ => None,
-        }
+        play(self.mem, self.kept, key)
     }
 
     /// Record picture `key`'s frame as it plays, in place of what the
@@ -147,8 +192,22 @@ impl<'m> Replay<'m> {
         if self.mem.is_empty() || self.too_long(key) {
             return None;
         }
-        self.held = Held::Nothing;
+        self.kept.held = Held::Nothing;
         Some(Recorder { replay: self, key, enc: Encoder::default(), done: false })
+    }
+}
+
+/// Picture `key`'s frame from `mem` as `kept` says, if it is the one held
+/// and lies in `mem`: what [`Replay::play`] plays, for an owner that lends
+/// the memory in parts.
+pub fn play<'r>(mem: &'r [u8], kept: &Kept, key: u32) -> Option<Player<'r>> {
+    match kept.held {
+        Held::Frame { key: k, from_end, len, stats } if k == key => {
+            let start = mem.len().checked_sub(from_end)?;
+            let rest = mem.get(start..start.checked_add(len)?)?;
+            Some(Player { rest, x: 0, y: 0, run: Run::Done, stats })
+        }
+        _ => None,
     }
 }
 
@@ -198,8 +257,18 @@ impl Recorder<'_, '_> {
         }
         self.enc.close(self.replay.mem);
         let key = self.key;
-        self.replay.held =
-            if self.enc.full { Held::TooLong { key } } else { Held::Frame { key, len: self.enc.len, stats } };
+        let (mem, kept) = (&mut *self.replay.mem, &mut *self.replay.kept);
+        let len = self.enc.len;
+        kept.held = if self.enc.full {
+            Held::TooLong { key }
+        } else if kept.tail > 0 && len <= kept.tail && mem.len() > kept.tail {
+            // Into the tail, to stay playable from it alone.
+            let at = mem.len() - kept.tail;
+            mem.copy_within(..len, at);
+            Held::Frame { key, from_end: kept.tail, len, stats }
+        } else {
+            Held::Frame { key, from_end: mem.len(), len, stats }
+        };
     }
 }
 
@@ -365,6 +434,25 @@ impl<R: RunSink> RunSink for Tee<'_, R> {
     }
 }
 
+/// Where a [`Player`] stands in its recording ([`Player::mark`]).
+#[derive(Debug, Clone, Copy)]
+pub struct Mark {
+    /// Bytes of the recording not yet begun.
+    left: usize,
+    x: u16,
+    y: u16,
+    run: Run,
+}
+
+/// Picture `key`'s frame from `mem` as `kept` says ([`play`]), taken up
+/// where `mark` stood: the rest of the frame a player was playing.
+pub fn resume<'r>(mem: &'r [u8], kept: &Kept, key: u32, mark: Mark) -> Option<Player<'r>> {
+    let mut p = play(mem, kept, key)?;
+    p.rest = p.rest.get(p.rest.len().checked_sub(mark.left)?..)?;
+    (p.x, p.y, p.run) = (mark.x, mark.y, mark.run);
+    Some(p)
+}
+
 /// A kept frame played again ([`Replay::play`]): a [`SampleSource`] (and
 /// an iterator) of the recorded samples.
 #[derive(Debug, Clone)]
@@ -394,6 +482,16 @@ impl Player<'_> {
     /// The statistics of the frame as it was recorded.
     pub fn stats(&self) -> FrameStats {
         self.stats
+    }
+
+    /// Where the player stands, to take it up again later ([`resume`]).
+    pub fn mark(&self) -> Mark {
+        Mark { left: self.rest.len(), x: self.x, y: self.y, run: self.run }
+    }
+
+    /// Whether the frame has no samples left.
+    pub fn is_done(&self) -> bool {
+        self.rest.is_empty() && matches!(self.run, Run::Done | Run::Same(_, 0) | Run::Lit(0))
     }
 }
 
@@ -494,7 +592,8 @@ mod tests {
     /// samples at a time; the samples handed on, and the replay.
     fn record(frame: &[Sample], cap: usize, chunk: usize) -> (Vec<Sample>, Option<Vec<Sample>>, usize) {
         let mut mem = std::vec![0u8; cap];
-        let mut replay = Replay::new(&mut mem);
+        let mut kept = Kept::new();
+        let mut replay = Replay::new(&mut mem, &mut kept);
         let mut live = Samples(frame.iter().copied());
         let mut played = Vec::new();
         let mut rec = replay.record(1).unwrap();
@@ -579,7 +678,8 @@ mod tests {
     fn a_frame_too_long_is_tried_once() {
         let frame: Vec<_> = (0..100).map(|k| Sample::new(k * 200, 0, Beam::Off)).collect();
         let mut mem = [0u8; 64];
-        let mut replay = Replay::new(&mut mem);
+        let mut kept = Kept::new();
+        let mut replay = Replay::new(&mut mem, &mut kept);
         let mut rec = replay.record(3).unwrap();
         rec.fill_with(&mut Samples(frame.iter().copied()), 1000, |_| {});
         rec.finish(FrameStats::default());
@@ -594,7 +694,8 @@ mod tests {
     fn an_unfinished_recording_is_not_played() {
         let frame = [Sample::new(1, 2, Beam::On); 10];
         let mut mem = [0u8; 64];
-        let mut replay = Replay::new(&mut mem);
+        let mut kept = Kept::new();
+        let mut replay = Replay::new(&mut mem, &mut kept);
         let mut rec = replay.record(3).unwrap();
         rec.fill_with(&mut Samples(frame.iter().copied()), 5, |_| {});
         // The recorder goes without `finish`: the frame was cut short.
@@ -606,15 +707,58 @@ mod tests {
     fn a_replay_of_another_picture_is_not_played() {
         let frame = [Sample::new(1, 2, Beam::On); 10];
         let mut mem = [0u8; 64];
-        let mut replay = Replay::new(&mut mem);
+        let mut kept = Kept::new();
+        let mut replay = Replay::new(&mut mem, &mut kept);
         let mut rec = replay.record(3).unwrap();
         rec.fill_with(&mut Samples(frame.iter().copied()), 50, |_| {});
         rec.finish(FrameStats::default());
         assert!(replay.play(3).is_some());
         assert!(replay.play(4).is_none());
-        let mem = replay.take();
-        assert_eq!(mem.len(), 64);
-        assert!(replay.play(3).is_none());
-        assert!(replay.record(5).is_none(), "no memory: nothing recorded");
+        assert!(Replay::new(&mut [], &mut Kept::new()).record(5).is_none(), "no memory: nothing recorded");
+    }
+
+    proptest! {
+        /// A recording that fits the tail is moved there and plays from
+        /// the tail alone, or from the whole memory; one that does not
+        /// stays at the start and plays from the whole memory only.
+        #[test]
+        fn a_recording_that_fits_the_tail_plays_from_it(frame in frame(), tail in 1usize..3000) {
+            let mut mem = std::vec![0u8; 1 << 16];
+            let mut kept = Kept::with_tail(tail);
+            let mut replay = Replay::new(&mut mem, &mut kept);
+            let mut rec = replay.record(1).unwrap();
+            rec.fill_with(&mut Samples(frame.iter().copied()), usize::MAX, |_| {});
+            rec.finish(FrameStats::default());
+            let len = replay.len();
+            let whole: Vec<_> = replay.play(1).unwrap().collect();
+            prop_assert_eq!(&whole, &frame);
+            let (head, rest) = mem.split_at(mem.len() - tail);
+            prop_assert_eq!(kept.in_tail(), len <= tail);
+            let from_tail: Option<Vec<_>> = play(rest, &kept, 1).map(Iterator::collect);
+            if len <= tail {
+                prop_assert_eq!(from_tail.as_ref(), Some(&frame));
+            } else {
+                prop_assert!(from_tail.is_none());
+                prop_assert!(play(head, &kept, 1).is_none());
+            }
+        }
+    }
+
+    #[test]
+    fn a_player_says_when_its_frame_is_done() {
+        let frame = [Sample::new(1, 2, Beam::On), Sample::new(3, 2, Beam::On), Sample::new(9, 9, Beam::Off)];
+        let mut mem = [0u8; 64];
+        let mut kept = Kept::new();
+        let mut replay = Replay::new(&mut mem, &mut kept);
+        let mut rec = replay.record(3).unwrap();
+        rec.fill_with(&mut Samples(frame.iter().copied()), 50, |_| {});
+        rec.finish(FrameStats::default());
+        let mut p = replay.play(3).unwrap();
+        for _ in 0..3 {
+            assert!(!p.is_done());
+            assert!(p.next().is_some());
+        }
+        assert!(p.is_done());
+        assert!(p.next().is_none());
     }
 }

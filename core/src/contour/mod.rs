@@ -105,6 +105,14 @@ impl core::ops::Add for ContourStats {
     }
 }
 
+/// The most commands one subgrid yields at one level, by any traversal
+/// (eight crossings on its eight edges, or dots and lines through nodes at
+/// the level): so a row of `n` cells at `l` levels yields at most
+/// `n * l * MAX_COMMANDS_A_CELL`. The engine bounds a row's output with it
+/// before contouring the row (`engine::stream`); checked exhaustively in
+/// `core/tests/properties.rs`.
+pub const MAX_COMMANDS_A_CELL: usize = 8;
+
 /// Check that every level is finite.
 ///
 /// # Errors

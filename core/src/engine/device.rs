@@ -27,6 +27,23 @@ pub(super) struct Shown {
     pub(super) bounds: Bounds,
 }
 
+/// Who has the slice memory, borrow after borrow
+/// ([`Engine::split`](super::Engine::split)); it changes hands at a frame
+/// boundary ([`Engine::update`](super::Engine::update)).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub(super) enum Lend {
+    /// All of it to the stream (and the commit): a transfer, its spill,
+    /// or nothing to replay.
+    Stream,
+    /// All of it to the replay of a still picture: nothing else needs it.
+    Screen,
+    /// The tail ([`Device::tail`] bytes) to the replay, holding the
+    /// picture's recording, and the head to the stream: the picture keeps
+    /// playing from memory while a volume arrives and is committed.
+    Tail,
+}
+
 /// Everything but the frame decoder and the two surfaces.
 #[derive(Debug)]
 pub(super) struct Device<'a> {
@@ -61,9 +78,18 @@ pub(super) struct Device<'a> {
     /// The board replays a still picture's frames from the slice memory
     /// ([`Engine::replay_frames`](super::Engine::replay_frames)).
     pub(super) replay_frames: bool,
-    /// A volume waits for the slice memory lent to the replay: it comes
-    /// back at the next update.
-    pub(super) reclaim: bool,
+    /// Who has the slice memory.
+    pub(super) lend: Lend,
+    /// Pieces (fragments) of the volume complete in the back and spill,
+    /// for its commit.
+    pub(super) pieces: u32,
+    /// Bytes of the slice memory's tail a recording may keep through a
+    /// transfer and its commit ([`replay_tail`](super::replay_tail)).
+    pub(super) tail: usize,
+    /// A volume of slices of this many bytes waits for the slice memory
+    /// lent to the replay: it comes (all of it, or the head) at the next
+    /// update.
+    pub(super) reclaim: Option<usize>,
     /// When it last came back for a volume (ms), until the volume begins.
     pub(super) reclaimed_ms: Option<u32>,
     pub(super) refresh_centi_hz: u16,
@@ -148,7 +174,13 @@ impl Device<'_> {
         }
     }
 
-    pub(super) fn handle(&mut self, msg: Message<'_>, now_ms: u32, back: &mut Geometry<'_>) {
+    pub(super) fn handle(
+        &mut self,
+        msg: Message<'_>,
+        now_ms: u32,
+        back: &mut Geometry<'_>,
+        slots: &mut [u8],
+    ) {
         let seq = match msg {
             Message::Hello { protocol, seq, .. } => {
                 self.abort(AbortReason::Restarted);
@@ -192,7 +224,7 @@ impl Device<'_> {
         };
         match self.session.standing(seq) {
             Standing::Next => {
-                let answer = self.apply(msg, now_ms, back).err();
+                let answer = self.apply(msg, now_ms, back, slots).err();
                 // Busy is "not now": the command is not taken, and the
                 // same `seq` is expected again (a sender retries it).
                 if answer != Some(NackCode::Busy) {
@@ -218,6 +250,7 @@ impl Device<'_> {
         msg: Message<'_>,
         now_ms: u32,
         back: &mut Geometry<'_>,
+        slots: &mut [u8],
     ) -> Result<(), NackCode> {
         let volume_data = matches!(msg, Message::BeginVolume { .. } | Message::SliceData { .. });
         if volume_data && self.commit {
@@ -225,11 +258,20 @@ impl Device<'_> {
             // it so, between frames); its surface is still in the back.
             return Err(NackCode::Busy);
         }
-        if matches!(msg, Message::BeginVolume { .. }) && self.stream.lent() {
-            // The slice memory holds the frame on screen, replayed; it
-            // comes back at the next update, between frames.
-            self.reclaim = true;
-            return Err(NackCode::Busy);
+        if let Message::BeginVolume { dims, sample_type, .. } = msg {
+            // The slice memory holds the frame on screen, replayed: it
+            // comes back at the next update, between frames; all of it,
+            // or the head if the two slices fit there.
+            let slices = 2 * usize::from(dims[0]) * usize::from(dims[1]) * sample_type.size();
+            let short = match self.lend {
+                Lend::Stream => false,
+                Lend::Screen => true,
+                Lend::Tail => slots.len() < slices,
+            };
+            if short {
+                self.reclaim = Some(slices);
+                return Err(NackCode::Busy);
+            }
         }
         match msg {
             Message::BeginVolume { dims, sample_type, spacing, levels, axes, every, .. } => {
@@ -247,10 +289,19 @@ impl Device<'_> {
                 Ok(())
             }
             Message::SliceData { slice, offset, data, .. } => {
-                self.stream.chunk(slice, offset, data, now_ms, back, self.cfg.defer_contouring)
+                let r =
+                    self.stream.chunk(slots, slice, offset, data, now_ms, back, self.cfg.defer_contouring);
+                if r == Err(NackCode::Busy) {
+                    // A row waits for the whole memory (next update).
+                    self.reclaim = Some(usize::MAX);
+                }
+                r
             }
             Message::EndVolume { .. } => {
-                self.stream.finish(back);
+                if !self.stream.finish(slots, back) {
+                    self.reclaim = Some(usize::MAX);
+                    return Err(NackCode::Busy);
+                }
                 let t = self.stream.transfer.ok_or(NackCode::Aborted)?;
                 if t.z < t.spec.dims[2] {
                     self.abort(AbortReason::Missing);
@@ -268,6 +319,7 @@ impl Device<'_> {
                     bounds,
                 });
                 self.commit = true;
+                self.pieces = t.frags;
                 self.counters.volumes = self.counters.volumes.wrapping_add(1);
                 let spilled = self.stream.spilled();
                 self.event(Event::Committed {

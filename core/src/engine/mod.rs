@@ -50,13 +50,13 @@ use crate::path::{Metric, Pass, Source};
 pub use board::{Board, Capacity};
 pub use buffers::{Buffers, StaticBuffers};
 pub use config::{EngineConfig, EngineError};
-use device::Device;
+use device::{Device, Lend};
 pub use event::{AbortReason, Counters, Event};
 pub use screen::{Frame, Projected, Screen};
 pub use session::REPLAY;
 pub use stream::VolumeSpec;
 
-use crate::beam::replay::Replay;
+use crate::beam::replay::{self, Kept, Player, Replay};
 use crate::beam::{BeamConfig, FrameStats, Scheduler, frame_stats};
 use crate::command::Point3;
 use crate::view::{Bounds, View, ViewTransform};
@@ -86,10 +86,26 @@ pub struct Engine<'a> {
     chain: ChainStats,
     /// Extra scratch for [`path::chain`](crate::path).
     scratch: &'a mut [u8],
-    /// The frame kept to play again, in the slice memory while it is idle
-    /// ([`Engine::replay_frames`]).
-    replay: Replay<'a>,
+    /// The slice memory: the stream's, the replay's, or cut between them
+    /// ([`Lend`]).
+    slices: &'a mut [u8],
+    /// What the replay keeps in the slice memory ([`Engine::replay_frames`]).
+    kept: Kept,
+    /// Where the frame played through a commit stood when it ended
+    /// ([`Engine::unfinished`]).
+    unfinished: Option<(u32, replay::Mark)>,
     generation: u32,
+}
+
+/// Bytes of the tail of a slice memory of `slice_memory` bytes that a
+/// still picture's recording may keep while a volume arrives and is
+/// committed (9/16 of it: 36,864 of the 64 KB of the STM32F407, a frame
+/// of some 18,000 samples, a 55 Hz refresh at 1 MS/s). The rest, the head,
+/// holds the volume's two slices and the scratch of its commit; a volume
+/// that needs more (larger slices, or a surface larger than the back
+/// holds) takes all of it, and the recording is lost.
+pub const fn replay_tail(slice_memory: usize) -> usize {
+    slice_memory / 16 * 9
 }
 
 /// How long after a volume took the slice memory back from the replay the
@@ -104,6 +120,8 @@ pub struct Link<'e, 'a> {
     decoder: &'e mut ProtocolDecoder,
     dev: &'e mut Device<'a>,
     back: &'e mut Geometry<'a>,
+    /// The part of the slice memory the stream has ([`Lend`]).
+    slots: &'e mut [u8],
 }
 
 impl<'a> Engine<'a> {
@@ -119,7 +137,8 @@ impl<'a> Engine<'a> {
         )
         .map_err(EngineError::View)?;
         let Buffers { slices, rows, front, back, scratch } = buffers;
-        let stream = Stream::new(slices, rows);
+        let stream = Stream::new(slices.len(), rows);
+        let tail = replay_tail(slices.len());
         if stream.slice_capacity() < 16 || stream.row_capacity() < 2 {
             return Err(EngineError::Buffers);
         }
@@ -147,7 +166,10 @@ impl<'a> Engine<'a> {
                 board_counts: false,
                 count_due: false,
                 replay_frames: false,
-                reclaim: false,
+                lend: Lend::Stream,
+                pieces: 0,
+                tail,
+                reclaim: None,
                 reclaimed_ms: None,
                 refresh_centi_hz: 0,
                 tx: Deque::new(),
@@ -159,7 +181,9 @@ impl<'a> Engine<'a> {
             transform: None,
             chain: ChainStats::default(),
             scratch,
-            replay: Replay::new(&mut []),
+            slices,
+            kept: Kept::with_tail(tail),
+            unfinished: None,
             generation: 0,
         })
     }
@@ -169,15 +193,18 @@ impl<'a> Engine<'a> {
     /// volume, view or beam) shows after the next [`Engine::update`].
     pub fn split(&mut self) -> (Link<'_, 'a>, Screen<'_, 'a>) {
         let dev = &self.dev;
-        let still = dev.shown.is_some() && dev.spin_deg_per_s == 0.0 && !dev.dirty && !dev.commit;
+        // (With a commit due, only a recording in the tail plays: nothing
+        // else is lent to the replay then.)
+        let still = dev.shown.is_some() && dev.spin_deg_per_s == 0.0 && !dev.dirty;
+        let (slots, lent) = cut(self.slices, dev.lend, dev.tail);
         let screen = Screen {
             front: &self.front,
             transform: self.transform,
             beam: self.dev.beam,
-            replay: &mut self.replay,
+            replay: Replay::new(lent, &mut self.kept),
             key: still.then_some(self.generation),
         };
-        (Link { decoder: &mut self.decoder, dev: &mut self.dev, back: &mut self.back }, screen)
+        (Link { decoder: &mut self.decoder, dev: &mut self.dev, back: &mut self.back, slots }, screen)
     }
 
     /// Take received bytes at time `now_ms`: see [`Link::feed`].
@@ -198,18 +225,32 @@ impl<'a> Engine<'a> {
     /// Between frames: abandon a stalled transfer; make a complete volume
     /// the picture (stitch and order it, in the idle slice buffers); fit a
     /// new or spinning view. Returns whether the picture changed.
+    pub fn update(&mut self, now_ms: u32) -> bool {
+        self.update_playing(now_ms, &mut |_| {})
+    }
+
+    /// [`Engine::update`], with the picture on screen played on while a new
+    /// volume is committed, as a board does: if the picture's frame is
+    /// recorded in the slice memory's tail ([`replay_tail`]) and the commit
+    /// fits the head, `refill` is called with that frame every few thousand
+    /// cycles of the commit's work, to take the samples its output has room
+    /// for (none, or a half buffer: it must not wait). The frame starts
+    /// again each time it ends. When the commit is done, the frame in
+    /// progress is left to finish ([`Engine::unfinished`]) before the new
+    /// picture's first frame, so the switch falls on a frame boundary.
+    /// Otherwise (no recording, or a commit that needs all of the memory)
+    /// `refill` is not called, and the beam waits for the commit
+    /// ([`Engine::commit_parks`]).
     // Never inlined: called once a frame, it costs nothing, and a board's
     // profile can then time the commit as one function
     // (`scripts/firmware-bench`).
     #[inline(never)]
-    pub fn update(&mut self, now_ms: u32) -> bool {
+    pub fn update_playing(&mut self, now_ms: u32, refill: &mut dyn FnMut(&mut Player<'_>)) -> bool {
         self.dev.check_timeout(now_ms);
-        if self.dev.reclaim || self.dev.commit {
-            self.take_back(self.dev.reclaim.then_some(now_ms));
-        }
+        self.reclaim(now_ms);
         let mut changed = false;
         if self.dev.commit {
-            self.commit();
+            self.commit(refill);
             self.dev.reclaimed_ms = None;
             changed = true;
         }
@@ -232,30 +273,63 @@ impl<'a> Engine<'a> {
         changed
     }
 
+    /// Whether the next [`Engine::update_playing`] commits a volume without
+    /// playing the picture on screen meanwhile (no recording of it in the
+    /// tail, or a commit that needs all of the slice memory): a board then
+    /// parks the beam for it.
+    pub fn commit_parks(&self) -> bool {
+        self.dev.commit && !self.commit_keeps_tail()
+    }
+
+    /// The rest of the frame [`Engine::update_playing`] was playing when its
+    /// commit ended (taken once): play it to its end before the new
+    /// picture's first frame.
+    pub fn unfinished(&mut self) -> Option<Player<'_>> {
+        let (key, mark) = self.unfinished.take()?;
+        let (_, lent) = cut(self.slices, self.dev.lend, self.dev.tail);
+        replay::resume(lent, &self.kept, key, mark)
+    }
+
     /// Keep a still picture's frame and play it again from memory
     /// (`on`), as a board does ([`crate::beam::replay`]): the first frame
     /// [`Screen::frame`] plays of a picture is recorded into the slice
     /// memory while no volume needs it, and the frames after it are played
     /// from the recording, the same samples at a few cycles a sample. A
-    /// volume's first command is then answered `Busy` once (the memory
-    /// comes back at the next [`Engine::update`]). Off by default.
+    /// recording that fits the memory's tail ([`replay_tail`]) stays there
+    /// while a volume whose slices fit the head arrives (with
+    /// [`EngineConfig::defer_contouring`]) and while it is committed
+    /// ([`Engine::update_playing`]); else the volume's first command is
+    /// answered `Busy` once, and the memory comes back at the next
+    /// [`Engine::update`]. Off by default.
     pub fn replay_frames(&mut self, on: bool) {
         self.dev.replay_frames = on;
         if !on {
-            self.take_back(None);
+            self.dev.lend = Lend::Stream;
+            self.kept.clear();
         }
     }
 
-    /// The slice memory back from the replay, if lent: for a commit, for
-    /// replay turned off, or for a volume that asked for it at `asked_ms`
-    /// (which then has [`RELEND_MS`] to begin before it is lent again).
-    fn take_back(&mut self, asked_ms: Option<u32>) {
+    /// At a frame boundary, the slice memory back from the replay for what
+    /// asked for it: a volume refused `Busy` (the head, if its slices fit
+    /// there and the recording is in the tail; else all of it), or a row
+    /// that waited for all of it.
+    fn reclaim(&mut self, now_ms: u32) {
         let dev = &mut self.dev;
-        if dev.stream.lent() {
-            dev.stream.give_back(self.replay.take());
-            dev.reclaimed_ms = asked_ms;
+        let asked = dev.reclaim.take();
+        let all = dev.stream.wants_all(true) || asked == Some(usize::MAX);
+        if let Some(slices) = asked {
+            let head = self.slices.len().saturating_sub(dev.tail);
+            let tail = dev.cfg.defer_contouring && self.kept.in_tail() && slices <= head;
+            dev.lend = if tail && dev.lend != Lend::Stream { Lend::Tail } else { Lend::Stream };
+            dev.reclaimed_ms = Some(now_ms);
         }
-        dev.reclaim = false;
+        if all {
+            dev.lend = Lend::Stream;
+        }
+        if dev.lend == Lend::Stream {
+            // The stream may write anywhere.
+            self.kept.clear();
+        }
     }
 
     /// Lend the slice memory to the replay while nothing needs it: a picture
@@ -264,86 +338,133 @@ impl<'a> Engine<'a> {
     fn lend(&mut self, now_ms: u32) {
         let dev = &mut self.dev;
         let waiting = dev.reclaimed_ms.is_some_and(|t| now_ms.wrapping_sub(t) < RELEND_MS);
-        if !dev.replay_frames || dev.shown.is_none() || dev.commit || dev.reclaim || waiting {
+        if !dev.replay_frames
+            || dev.shown.is_none()
+            || dev.commit
+            || dev.reclaim.is_some()
+            || waiting
+            || !dev.stream.idle()
+        {
             return;
         }
-        if let Some(mem) = dev.stream.lend() {
-            self.replay = Replay::new(mem);
-            dev.reclaimed_ms = None;
-        }
+        dev.lend = Lend::Screen;
+        dev.reclaimed_ms = None;
     }
 
-    /// The received surface becomes the picture.
-    fn commit(&mut self) {
-        let dev = &mut self.dev;
+    /// Whether the commit due plays the picture on screen from the tail:
+    /// its recording is there, nothing spilled, and the stitch pass's
+    /// scratch fits the head.
+    fn commit_keeps_tail(&self) -> bool {
+        let dev = &self.dev;
+        let head = self.slices.len().saturating_sub(dev.tail);
+        dev.lend == Lend::Tail
+            && self.kept.in_tail()
+            && !dev.stream.spills()
+            && crate::path::stitch_reserve(dev.pieces as usize, self.back.len()) <= head
+    }
+
+    /// The received surface becomes the picture, the picture on screen
+    /// played on through `refill` meanwhile if it can be
+    /// ([`Engine::update_playing`]).
+    fn commit(&mut self, refill: &mut dyn FnMut(&mut Player<'_>)) {
+        if !self.commit_keeps_tail() {
+            self.dev.lend = Lend::Stream;
+            self.kept.clear();
+        }
+        let key = self.generation;
+        let Self { dev, front, back, scratch: extra, slices, kept, chain, unfinished, .. } = self;
         dev.commit = false;
         let Some(shown) = dev.shown.as_mut() else { return };
-        let (mut spill, free) = dev.stream.take_spill();
-        let scratch = if free.len() >= self.scratch.len() { free } else { &mut *self.scratch };
-        let view = View { spacing: shown.spacing, bits: dev.beam.bits, ..dev.view };
-        let stitched = loop {
-            let pieces = Source::two(&self.back, &spill);
-            // Every view fits the surface, not the volume: the box of its
-            // pieces (stitching and merging keep their end points, so it is
-            // the picture's box too).
-            if let Some([lo, hi]) = pieces.extent() {
-                shown.bounds = Bounds::new(self.back.point(lo), self.back.point(hi));
+        let capacity = slices.len();
+        let (slots, lent) = cut(slices, dev.lend, dev.tail);
+        let lent: &[u8] = lent;
+        let kept: &Kept = kept;
+        // The frame on screen, played over and over while the passes run.
+        let mut player = replay::play(lent, kept, key);
+        let mut polled = false;
+        let mut poll = || {
+            if let Some(p) = player.as_mut() {
+                polled = true;
+                refill(p);
+                if p.is_done() {
+                    player = replay::play(lent, kept, key);
+                }
             }
-            // Merge within the tolerance at the largest scale a view can
-            // give: the bounding sphere's fit, times the longest voxel side,
-            // doubled.
-            let tolerance = ViewTransform::fit_sphere(&view, shown.bounds).map_or(0.0, |t| {
-                let side = shown.spacing.iter().fold(0.0f32, |m, &s| m.max(s));
-                dev.cfg.merge_tolerance / (2.0 * t.scale() * side)
-            });
-            // Stitch the pieces (the back's, then those that spilled into
-            // the slice memory) into maximal polylines (into the front), then
-            // order those for short jumps (back into the back), and make that
-            // the front. Collinear runs are merged once: in the order pass,
-            // which then also joins polylines that touch where one ends and
-            // the next is entered (merging first could take such a vertex
-            // away); but in the stitch pass when the pieces are more than
-            // the front holds (stitching joins them, merging thins them: the
-            // surface fits again).
-            let merge_first = pieces.len() > self.front.capacity();
-            let (first, then) = if merge_first { (tolerance, 0.0) } else { (0.0, tolerance) };
-            let stitched = crate::path::chain(pieces, &mut self.front, scratch, [0; 3], first, Pass::Stitch);
-            // A picture the front cannot hold is thinned as the stream
-            // thins one the memory cannot: every other slice goes, until it
-            // fits or one slice of each plane is left.
-            let coarser = if stitched.cut == 0 { None } else { shown.stride.coarser() };
-            let Some(coarser) = coarser else { break (stitched, then) };
-            shown.stride = coarser;
-            crate::path::thin(&mut self.back, &mut spill, &shown.stride);
+        };
+        // A half buffer's worth before anything else: the frame before
+        // ended just now.
+        poll();
+        let view = View { spacing: shown.spacing, bits: dev.beam.bits, ..dev.view };
+        let stitched = {
+            let (mut spill, free) = dev.stream.take_spill(&mut *slots);
+            let scratch = if free.len() >= extra.len() { free } else { &mut **extra };
+            loop {
+                let pieces = Source::two(back, &spill);
+                // Every view fits the surface, not the volume: the box of its
+                // pieces (stitching and merging keep their end points, so it is
+                // the picture's box too).
+                if let Some([lo, hi]) = pieces.extent(&mut poll) {
+                    shown.bounds = Bounds::new(back.point(lo), back.point(hi));
+                }
+                // Merge within the tolerance at the largest scale a view can
+                // give: the bounding sphere's fit, times the longest voxel side,
+                // doubled.
+                let tolerance = ViewTransform::fit_sphere(&view, shown.bounds).map_or(0.0, |t| {
+                    let side = shown.spacing.iter().fold(0.0f32, |m, &s| m.max(s));
+                    dev.cfg.merge_tolerance / (2.0 * t.scale() * side)
+                });
+                // Stitch the pieces (the back's, then those that spilled into
+                // the slice memory) into maximal polylines (into the front), then
+                // order those for short jumps (back into the back), and make that
+                // the front. Collinear runs are merged once: in the order pass,
+                // which then also joins polylines that touch where one ends and
+                // the next is entered (merging first could take such a vertex
+                // away); but in the stitch pass when the pieces are more than
+                // the front holds (stitching joins them, merging thins them: the
+                // surface fits again).
+                let merge_first = pieces.len() > front.capacity();
+                let (first, then) = if merge_first { (tolerance, 0.0) } else { (0.0, tolerance) };
+                let stitched =
+                    crate::path::chain_polled(pieces, front, scratch, [0; 3], first, Pass::Stitch, &mut poll);
+                // A picture the front cannot hold is thinned as the stream
+                // thins one the memory cannot: every other slice goes, until it
+                // fits or one slice of each plane is left.
+                let coarser = if stitched.cut == 0 { None } else { shown.stride.coarser() };
+                let Some(coarser) = coarser else { break (stitched, then) };
+                shown.stride = coarser;
+                crate::path::thin(back, &mut spill, &shown.stride);
+            }
         };
         let (stitched, then) = stitched;
         let spec = *shown;
-        let slices = dev.stream.idle_scratch().unwrap_or(&mut []);
-        let scratch = if slices.len() >= self.scratch.len() { slices } else { &mut *self.scratch };
+        // The order pass's scratch is the head of the slice memory whether
+        // or not a recording keeps the tail: its picture depends on its
+        // scratch (the grid of ends), and must not on what played before.
+        let head = slots.len().min(capacity.saturating_sub(dev.tail));
+        let slots = slots.get_mut(..head).unwrap_or_default();
+        let scratch = if slots.len() >= extra.len() { slots } else { &mut **extra };
         // A still view orders for its own screen (a jump across the depth
         // costs it nothing); a spinning one in space, for every angle.
         let metric = match ViewTransform::fit_sphere(&view, spec.bounds) {
             Ok(t) if dev.spin_deg_per_s == 0.0 => {
                 let park = dev.beam.park_sample();
-                Metric::Screen {
-                    view: t,
-                    shift: self.front.shift(),
-                    park: [f32::from(park.x), f32::from(park.y)],
-                }
+                Metric::Screen { view: t, shift: front.shift(), park: [f32::from(park.x), f32::from(park.y)] }
             }
             _ => Metric::Space,
         };
-        let ordered = crate::path::chain(
-            Source::one(&self.front),
-            &mut self.back,
+        let ordered = crate::path::chain_polled(
+            Source::one(front),
+            back,
             scratch,
             [0; 3],
             then,
             Pass::Order(metric),
+            &mut poll,
         );
-        core::mem::swap(&mut self.front, &mut self.back);
-        self.back.reset(self.back.shift());
-        self.chain = ChainStats {
+        *unfinished = player.filter(|_| polled).map(|p| (key, p.mark()));
+        core::mem::swap(front, back);
+        back.reset(back.shift());
+        *chain = ChainStats {
             fragments: stitched.fragments,
             points_in: stitched.points_in,
             ordered: stitched.ordered && ordered.ordered,
@@ -354,13 +475,13 @@ impl<'a> Engine<'a> {
             ..ordered
         };
         if let Some(s) = dev.shown.as_mut() {
-            s.points = self.front.len() as u32;
+            s.points = front.len() as u32;
         }
         dev.event(Event::Stitched {
-            fragments: self.chain.fragments,
-            points: self.chain.points_out,
-            cut: self.chain.cut,
-            ordered: self.chain.ordered,
+            fragments: chain.fragments,
+            points: chain.points_out,
+            cut: chain.cut,
+            ordered: chain.ordered,
             every: spec.stride.every,
         });
         dev.status_due = true;
@@ -498,6 +619,15 @@ impl<'a> Engine<'a> {
     }
 }
 
+/// The slice memory cut as `lend` says: the stream's part, the replay's.
+fn cut(mem: &mut [u8], lend: Lend, tail: usize) -> (&mut [u8], &mut [u8]) {
+    match lend {
+        Lend::Stream => (mem, &mut []),
+        Lend::Screen => (&mut [], mem),
+        Lend::Tail => mem.split_at_mut(mem.len().saturating_sub(tail)),
+    }
+}
+
 impl Link<'_, '_> {
     /// What the engine is doing ([`Engine::state`]).
     pub fn state(&self) -> DeviceState {
@@ -521,7 +651,7 @@ impl Link<'_, '_> {
                 None => {}
                 Some(Ok(msg)) => {
                     self.dev.counters.frames = self.dev.counters.frames.wrapping_add(1);
-                    self.dev.handle(msg, now_ms, self.back);
+                    self.dev.handle(msg, now_ms, self.back, self.slots);
                     if defer && self.dev.stream.busy() {
                         return n + 1;
                     }
@@ -557,7 +687,7 @@ impl Link<'_, '_> {
     /// of cells of one plane, `nx - 1` or `ny - 1` of them; a slice of
     /// `n x n` owes about `3 n` rows). Returns whether some are left.
     pub fn contour(&mut self, cells: usize) -> bool {
-        self.dev.stream.work(self.back, cells)
+        self.dev.stream.work(self.slots, self.back, cells)
     }
 
     /// As [`Link::contour`], one whole row and then more while
@@ -565,7 +695,7 @@ impl Link<'_, '_> {
     /// keeps one (making the contourer for a call costs about as much as a
     /// short row, so a call should do more than one when it can).
     pub fn contour_while(&mut self, more: impl FnMut(usize) -> bool) -> bool {
-        self.dev.stream.work_while(self.back, more)
+        self.dev.stream.work_while(self.slots, self.back, more)
     }
 
     /// Move answer bytes for the UART into `out`; returns how many.

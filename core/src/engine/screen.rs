@@ -18,7 +18,7 @@ pub struct Screen<'e, 'a> {
     pub(super) front: &'e Geometry<'a>,
     pub(super) transform: Option<ViewTransform>,
     pub(super) beam: BeamConfig,
-    pub(super) replay: &'e mut Replay<'a>,
+    pub(super) replay: Replay<'e>,
     /// The picture's generation, when its frames may be replayed (a still
     /// picture, nothing about to change it).
     pub(super) key: Option<u32>,
@@ -28,7 +28,7 @@ impl<'e, 'a> Screen<'e, 'a> {
     /// One frame, the samples of [`Engine::frame`](super::Engine::frame):
     /// replayed when the picture's frame is kept, else scheduled (and kept,
     /// if the engine replays frames and the frame fits).
-    pub fn frame(&mut self) -> Frame<'_, 'a> {
+    pub fn frame(&mut self) -> Frame<'_, 'e> {
         let live = Scheduler::new(Projected::new(self.front, self.transform), &self.beam);
         let Some(key) = self.key else { return Frame::Live(live) };
         if self.replay.holds(key) {

@@ -16,7 +16,7 @@
 
 use crate::command::{Command, CommandSink, Point3};
 use crate::contour::trace::Traversal;
-use crate::contour::{ContourStats, RowContourer};
+use crate::contour::{ContourStats, MAX_COMMANDS_A_CELL, RowContourer};
 use crate::path::{self, Geometry, Held, Stride};
 use crate::wire::{AXIS_X, AXIS_Y, AXIS_Z, Levels, NackCode, SampleType};
 use core::convert::Infallible;
@@ -119,14 +119,21 @@ pub(crate) struct Job {
 /// volume. So a volume of small slices may have a larger surface: of
 /// 32 x 32 `f32` (8 KB), the 64 KB of the firmware leave room for 9,000
 /// more points.
+///
+/// The slice memory itself is the engine's, lent to each call as `slots`:
+/// all of it, or (while the replay of the picture on screen keeps its
+/// tail) its head. With the head alone, a row is contoured only when the
+/// back has room for all it can yield, so nothing is ever kept in the
+/// spill then: what a transfer keeps does not depend on which was lent.
+/// When the back is short of that room, the row waits and the stream asks
+/// for all of the memory ([`Stream::wants_all`]).
 #[derive(Debug)]
 pub(crate) struct Stream<'a> {
-    /// Both slices, one after the other, and the spill (empty while lent:
-    /// [`Stream::lend`]).
-    slots: &'a mut [u8],
-    /// Bytes of `slots` when not lent.
+    /// Bytes of the whole slice memory.
     capacity: usize,
     rows: [&'a mut [f32]; 2],
+    /// A row waited for the whole slice memory.
+    wants_all: bool,
     /// The slot receiving slice `z`; the other holds slice `z - 1`.
     cur: usize,
     pub transfer: Option<Transfer>,
@@ -274,43 +281,35 @@ fn widen<const N: usize>(
 }
 
 impl<'a> Stream<'a> {
-    pub(crate) fn new(slots: &'a mut [u8], rows: [&'a mut [f32]; 2]) -> Self {
-        let capacity = slots.len();
-        Self { slots, capacity, rows, cur: 0, transfer: None, spill: None }
+    /// A stream over a slice memory of `capacity` bytes.
+    pub(crate) fn new(capacity: usize, rows: [&'a mut [f32]; 2]) -> Self {
+        Self { capacity, rows, wants_all: false, cur: 0, transfer: None, spill: None }
     }
 
-    /// Bytes one slice may hold (lent or not).
+    /// Bytes one slice may hold.
     pub(crate) fn slice_capacity(&self) -> usize {
         self.capacity / 2
     }
 
-    /// The slice memory, lent while nothing needs it: no transfer, no
-    /// spill waiting for its commit. `None` then, or if already lent.
-    pub(crate) fn lend(&mut self) -> Option<&'a mut [u8]> {
-        if self.transfer.is_some() || self.spill.is_some() || self.lent() {
-            return None;
+    /// Whether nothing needs the slice memory: no transfer, no spill
+    /// waiting for its commit.
+    pub(crate) fn idle(&self) -> bool {
+        self.transfer.is_none() && self.spill.is_none()
+    }
+
+    /// Whether a row waits for the whole slice memory (it had the head
+    /// alone); cleared by `take`.
+    pub(crate) fn wants_all(&mut self, take: bool) -> bool {
+        let w = self.wants_all;
+        if take {
+            self.wants_all = false;
         }
-        Some(core::mem::take(&mut self.slots))
+        w
     }
 
-    /// Whether the slice memory is lent ([`Stream::lend`]).
-    pub(crate) fn lent(&self) -> bool {
-        self.slots.len() < self.capacity
-    }
-
-    /// The lent slice memory back (what [`Stream::lend`] gave: the whole
-    /// of it, which `capacity` counts).
-    pub(crate) fn give_back(&mut self, slots: &'a mut [u8]) {
-        if self.lent() {
-            self.capacity = slots.len();
-            self.slots = slots;
-        }
-    }
-
-    /// The slice memory as scratch, while no transfer needs it (and the
-    /// spill is taken).
-    pub(crate) fn idle_scratch(&mut self) -> Option<&mut [u8]> {
-        if self.transfer.is_some() { None } else { Some(self.slots) }
+    /// Whether the spill holds anything.
+    pub(crate) fn spills(&self) -> bool {
+        self.spill.is_some_and(|(_, h)| h.len() > 0)
     }
 
     /// What the last transfer spilled (counted with the back's).
@@ -322,13 +321,13 @@ impl<'a> Stream<'a> {
     /// the slice memory, and the rest of that memory as scratch. The spill
     /// is forgotten: once the volume is committed the memory is all
     /// scratch again ([`Stream::idle_scratch`]).
-    pub(crate) fn take_spill(&mut self) -> (Geometry<'_>, &mut [u8]) {
+    pub(crate) fn take_spill<'s>(&mut self, slots: &'s mut [u8]) -> (Geometry<'s>, &'s mut [u8]) {
         let (at, held) = match (self.transfer, self.spill.take()) {
             (None, Some(spill)) => spill,
             _ => (0, Held::default()),
         };
-        let held = Geometry::move_to_front(self.slots, at, held);
-        let (store, rest) = self.slots.split_at_mut(Geometry::bytes_for(held.len()).min(self.slots.len()));
+        let held = Geometry::move_to_front(slots, at, held);
+        let (store, rest) = slots.split_at_mut(Geometry::bytes_for(held.len()).min(slots.len()));
         (Geometry::lent(store, held), rest)
     }
 
@@ -338,10 +337,10 @@ impl<'a> Stream<'a> {
         self.transfer.map_or(usize::MAX, |t| t.spec.slice_bytes()).min(self.slice_capacity())
     }
 
-    /// The two slots: (current, previous).
-    fn halves(&mut self) -> (&mut [u8], &mut [u8]) {
-        let n = self.slot_bytes();
-        let (a, rest) = self.slots.split_at_mut(n);
+    /// The two slots of `slots`: (current, previous).
+    fn halves<'s>(&self, slots: &'s mut [u8]) -> (&'s mut [u8], &'s mut [u8]) {
+        let n = self.slot_bytes().min(slots.len());
+        let (a, rest) = slots.split_at_mut(n);
         let b = rest.get_mut(..n).unwrap_or(&mut []);
         if self.cur == 0 { (a, b) } else { (b, a) }
     }
@@ -377,8 +376,12 @@ impl<'a> Stream<'a> {
     /// slice, contour what the slice completes into `geometry`, at once or,
     /// with `defer`, later ([`Stream::work`]). A job still pending from the
     /// slice before is finished first.
+    ///
+    /// `Busy` (not taken) if that job waits for the whole slice memory.
+    #[expect(clippy::too_many_arguments, reason = "a chunk, its clock, and the memory it goes to")]
     pub(crate) fn chunk(
         &mut self,
+        slots: &mut [u8],
         slice: u16,
         offset: u32,
         data: &[u8],
@@ -386,7 +389,9 @@ impl<'a> Stream<'a> {
         geometry: &mut Geometry<'_>,
         defer: bool,
     ) -> Result<(), NackCode> {
-        self.finish(geometry);
+        if !self.finish(slots, geometry) {
+            return Err(NackCode::Busy);
+        }
         let t = self.transfer.ok_or(NackCode::Aborted)?;
         let slice_bytes = t.spec.slice_bytes();
         if slice >= t.spec.dims[2] {
@@ -403,7 +408,7 @@ impl<'a> Stream<'a> {
         if data.is_empty() || end > slice_bytes {
             return Err(NackCode::Invalid);
         }
-        let (slot, _) = self.halves();
+        let (slot, _) = self.halves(slots);
         slot.get_mut(start..end).ok_or(NackCode::DimsOverCapacity)?.copy_from_slice(data);
         let complete = end == slice_bytes;
         if let Some(t) = self.transfer.as_mut() {
@@ -420,29 +425,39 @@ impl<'a> Stream<'a> {
         if complete {
             self.cur = 1 - self.cur;
             if !defer {
-                self.finish(geometry);
+                // (Not deferred, the whole memory is lent: it never waits.)
+                self.finish(slots, geometry);
             }
         }
         Ok(())
     }
 
-    /// Finish the pending job, if any.
-    pub(crate) fn finish(&mut self, geometry: &mut Geometry<'_>) {
-        while self.work(geometry, usize::MAX) {}
+    /// Finish the pending job, if any; false if it waits for the whole
+    /// slice memory ([`Stream::wants_all`]).
+    pub(crate) fn finish(&mut self, slots: &mut [u8], geometry: &mut Geometry<'_>) -> bool {
+        while self.work(slots, geometry, usize::MAX) {
+            if self.wants_all {
+                return false;
+            }
+        }
+        true
     }
 
     /// Contour whole rows of subgrids of the pending job into `geometry`,
     /// at least one and until `cells` cells are done. Returns whether some
     /// are left.
-    pub(crate) fn work(&mut self, geometry: &mut Geometry<'_>, cells: usize) -> bool {
-        self.work_while(geometry, |done| done < cells)
+    pub(crate) fn work(&mut self, slots: &mut [u8], geometry: &mut Geometry<'_>, cells: usize) -> bool {
+        self.work_while(slots, geometry, |done| done < cells)
     }
 
     /// Contour whole rows of subgrids of the pending job into `geometry`:
     /// one, then more while `more(cells done)` says so. Returns whether
-    /// some are left.
+    /// some are left. With the head of the slice memory alone, a row the
+    /// back may not have room for waits (none is done), and the stream
+    /// asks for the whole memory ([`Stream::wants_all`]).
     pub(crate) fn work_while(
         &mut self,
+        slots: &mut [u8],
         geometry: &mut Geometry<'_>,
         mut more: impl FnMut(usize) -> bool,
     ) -> bool {
@@ -452,8 +467,8 @@ impl<'a> Stream<'a> {
         let mut left = true;
         let n = self.slot_bytes();
         let (at, held) = self.spill.unwrap_or((2 * n, Held::empty(geometry.shift())));
-        let memory = self.slots.len();
-        let (slots, rest) = self.slots.split_at_mut(at.min(self.slots.len()));
+        let head_only = slots.len() < self.capacity;
+        let (slots, rest) = slots.split_at_mut(at.min(slots.len()));
         let mut spill = Geometry::lent(rest, held);
         if let Ok(mut rc) = RowContourer::new::<Infallible>(t.spec.levels.as_slice(), Traversal::Compiled) {
             // (Making the contourer clears its 2 KB of scratch: a short row
@@ -463,7 +478,7 @@ impl<'a> Stream<'a> {
                 back: geometry,
                 spill: &mut spill,
                 frags: &mut t.frags,
-                memory,
+                memory: self.capacity,
                 stride: t.stride,
                 slice: (2, 0),
                 live: true,
@@ -471,6 +486,15 @@ impl<'a> Stream<'a> {
             let (s0, s1) = slots.split_at(n.min(slots.len()));
             let slots = [s0, s1];
             loop {
+                // More than a row can yield, and one: the back keeps the
+                // row's every command, and never at its last slot, as it
+                // does with the whole memory lent (see `Keep`).
+                if head_only
+                    && sink.back.capacity().saturating_sub(sink.back.len()) <= Self::row_bound(&t.spec)
+                {
+                    self.wants_all = true;
+                    break;
+                }
                 match Self::row(&t.spec, &mut job, &mut rc, slots, &mut self.rows, &mut sink, &mut stats) {
                     Some(n) => done = done.saturating_add(n),
                     None => {
@@ -496,6 +520,14 @@ impl<'a> Stream<'a> {
         t.job = left.then_some(job);
         self.transfer = Some(t);
         left
+    }
+
+    /// The most commands a row of `spec` may yield
+    /// ([`MAX_COMMANDS_A_CELL`] a cell and level).
+    fn row_bound(spec: &VolumeSpec) -> usize {
+        // (The longer extent: before `ahead`, the phase may still move on.)
+        let n = usize::from(spec.dims[0].max(spec.dims[1]));
+        n.saturating_sub(1) * spec.levels.len() * MAX_COMMANDS_A_CELL
     }
 
     /// Move `job` past the phases that are done or have nothing to do, and

@@ -2,8 +2,8 @@
 //! linked lists of a grid of cells (searches around a point) or of hashed
 //! buckets (lookups at a point), in words of caller scratch.
 
-use super::ChainStats;
 use super::store::{Kind, Packed, Source, pack};
+use super::{ChainStats, Poll};
 use crate::fastmath::sqrt;
 
 /// No entry.
@@ -313,6 +313,8 @@ pub(super) struct Index<'s, 'g> {
     /// cells, spread over all of them. 0: the grid of cells (the order
     /// pass, which searches around a point).
     pub(super) buckets: usize,
+    /// Called as the work goes on ([`super::chain_polled`]).
+    pub(super) poll: Poll<'s>,
 }
 
 impl<'s, 'g> Index<'s, 'g> {
@@ -322,17 +324,24 @@ impl<'s, 'g> Index<'s, 'g> {
         any_vertex: bool,
         hashed: bool,
         width: Width,
+        poll: Poll<'s>,
     ) -> Option<Self> {
         let points = src.len();
         let mut frags = 0usize;
         let mut top = [0u16; 3];
-        src.for_each_kind(|i, kind| frags += usize::from(kind.starts() || i == 0));
+        src.for_each_kind(|i, kind| {
+            frags += usize::from(kind.starts() || i == 0);
+            if i % 64 == 0 {
+                poll.tick(16);
+            }
+        });
         if !hashed {
             // The grid's extent (the stitch pass's buckets need none).
             for i in 0..points {
                 for (t, v) in top.iter_mut().zip(src.point_at(i)?) {
                     *t = (*t).max(v);
                 }
+                poll.tick(1);
             }
         }
         // Words of `u32`, unless `u16`s fit and the scratch is short: the
@@ -394,12 +403,18 @@ impl<'s, 'g> Index<'s, 'g> {
                 w.set(k, i as u32);
                 k += 1;
             }
+            if i % 64 == 0 {
+                poll.tick(16);
+            }
         });
         for c in 0..cells {
             w.set(heads + c, NONE);
+            if c % 256 == 0 {
+                poll.tick(16);
+            }
         }
         let mut index =
-            Self { src, w, n, bits, heads, links, dead, frags, any_vertex, buckets, odd: Some(0) };
+            Self { src, w, n, bits, heads, links, dead, frags, any_vertex, buckets, odd: Some(0), poll };
         if any_vertex {
             // The order pass links what it needs when it needs it
             // ([`Index::relink`]).
@@ -421,6 +436,7 @@ impl<'s, 'g> Index<'s, 'g> {
                 if index.kind(from) != Kind::Dot {
                     odd ^= h;
                 }
+                index.poll.tick(2);
             }
             index.odd = Some(odd);
         }
@@ -568,6 +584,7 @@ impl<'s, 'g> Index<'s, 'g> {
         let mut prev = NONE;
         let mut at = self.w.get(self.heads + c);
         while at != NONE {
+            self.poll.tick(1);
             let next = self.w.get(self.links + at as usize);
             if self.dead(at as usize) {
                 if prev == NONE {
@@ -607,6 +624,9 @@ impl<'s, 'g> Index<'s, 'g> {
         };
         for c in 0..self.cells() {
             self.w.set(self.heads + c, NONE);
+            if c % 64 == 0 {
+                self.poll.tick(4);
+            }
         }
         self.w.clear_bits(self.dead, self.src.len());
         for f in 0..self.frags {
@@ -615,6 +635,8 @@ impl<'s, 'g> Index<'s, 'g> {
             if if hashed { self.is_loop(f) } else { !self.drawn(f) } {
                 self.each_slot(f, |x, s| x.link(s));
             }
+            let (from, to) = self.span(f);
+            self.poll.tick(2 + (to - from) as u32);
         }
     }
 
@@ -668,6 +690,7 @@ impl<'s, 'g> Index<'s, 'g> {
     pub(super) fn each_end(&self, c: usize, mut visit: impl FnMut(usize) -> bool) {
         let mut at = self.w.get(self.heads + c);
         while at != NONE {
+            self.poll.tick(1);
             let s = at as usize;
             let live = if self.any_vertex { !self.dead(s) } else { !self.drawn(s / 2) };
             if live && !visit(s) {
@@ -754,6 +777,7 @@ impl<'s, 'g> Index<'s, 'g> {
         // The ends of one cell (its drawn ones taken out of the list
         // first): whether one lies at `cur` (then it is the nearest).
         let visit = |x: &mut Self, cell: i32, best: &mut Option<(u64, usize)>| {
+            x.poll.tick(1);
             x.prune(cell as usize);
             x.each_end(cell as usize, |s| {
                 let i = x.end_point(s);
@@ -800,6 +824,7 @@ impl<'s, 'g> Index<'s, 'g> {
     /// it have none for good: ends are only ever drawn).
     pub(super) fn first_from(&self, scan: &mut usize) -> Option<usize> {
         while *scan < self.cells() {
+            self.poll.tick(1);
             let mut first = None;
             self.each_end(*scan, |s| {
                 first = Some(s);
@@ -817,6 +842,7 @@ impl<'s, 'g> Index<'s, 'g> {
     /// another, and a dot where a line or another dot is.
     pub(super) fn cull(&mut self, stats: &mut ChainStats) {
         for f in 0..self.frags {
+            self.poll.tick(4);
             if self.drawn(f) {
                 continue;
             }

@@ -61,6 +61,7 @@ pub mod store;
 mod tests;
 pub mod thin;
 
+use core::cell::Cell;
 pub(crate) use index::stitch_reserve;
 use index::{Index, Width};
 use merge::{Out, Walk};
@@ -116,6 +117,7 @@ pub(crate) enum Pass {
 /// none). `start` is where the beam comes from. `scratch` should
 /// hold about 7 bytes a point; with less, the fragments are copied as they
 /// are.
+#[cfg_attr(not(test), expect(dead_code, reason = "the engine polls; the tests chain without"))]
 pub(crate) fn chain(
     src: Source<'_>,
     dst: &mut Geometry<'_>,
@@ -124,14 +126,80 @@ pub(crate) fn chain(
     tolerance: f32,
     pass: Pass,
 ) -> ChainStats {
-    chain_on(src, dst, scratch, start, tolerance, pass, pass == Pass::Stitch, Width::Fit)
+    chain_polled(src, dst, scratch, start, tolerance, pass, &mut || {})
+}
+
+/// [`chain`], calling `poll` every [`POLL_WORK`] units of work or so (a
+/// unit is about a point passed over, some tens of cycles): so that a
+/// board keeps its output fed from elsewhere while a pass runs. What the
+/// pass makes does not depend on it.
+pub(crate) fn chain_polled(
+    src: Source<'_>,
+    dst: &mut Geometry<'_>,
+    scratch: &mut [u8],
+    start: Packed,
+    tolerance: f32,
+    pass: Pass,
+    poll: &mut dyn FnMut(),
+) -> ChainStats {
+    chain_on(src, dst, scratch, start, tolerance, pass, pass == Pass::Stitch, Width::Fit, poll)
+}
+
+/// Units of work ([`chain_polled`]) between two polls.
+pub(crate) const POLL_WORK: u32 = 256;
+
+/// A poll called as work is done ([`chain_polled`]). Ticked through a
+/// shared reference, so that a search that only reads (the walk of a list
+/// of ends) counts its work too.
+pub(crate) struct Poll<'p> {
+    f: Cell<Option<&'p mut dyn FnMut()>>,
+    work: Cell<u32>,
+}
+
+impl<'p> Poll<'p> {
+    pub(crate) fn new(f: &'p mut dyn FnMut()) -> Self {
+        Self { f: Cell::new(Some(f)), work: Cell::new(0) }
+    }
+
+    /// No poll.
+    #[cfg(test)]
+    pub(crate) fn none() -> Self {
+        Self { f: Cell::new(None), work: Cell::new(0) }
+    }
+
+    /// `units` of work done: poll if [`POLL_WORK`] are done since the last.
+    #[inline(always)]
+    pub(crate) fn tick(&self, units: u32) {
+        let work = self.work.get().wrapping_add(units);
+        if work >= POLL_WORK {
+            self.fire();
+        } else {
+            self.work.set(work);
+        }
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn fire(&self) {
+        self.work.set(0);
+        if let Some(f) = self.f.take() {
+            f();
+            self.f.set(Some(f));
+        }
+    }
+}
+
+impl core::fmt::Debug for Poll<'_> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Poll").field("work", &self.work.get()).finish_non_exhaustive()
+    }
 }
 
 /// [`chain`], with the stitch pass's ends in hashed buckets or (`hashed`
 /// false, for the test that both stitch alike) in the grid of cells, and
 /// the index in the words `width` says (for the tests that both widths
 /// chain alike).
-#[expect(clippy::too_many_arguments, reason = "the tests' two knobs beside chain's own")]
+#[expect(clippy::too_many_arguments, reason = "the tests' two knobs and the poll beside chain's own")]
 fn chain_on(
     src: Source<'_>,
     dst: &mut Geometry<'_>,
@@ -141,11 +209,14 @@ fn chain_on(
     pass: Pass,
     hashed: bool,
     width: Width,
+    poll: &mut dyn FnMut(),
 ) -> ChainStats {
     dst.reset(src.shift());
     let mut stats = ChainStats { points_in: src.len() as u32, ..ChainStats::default() };
     let any_vertex = pass != Pass::Stitch;
-    let Some(mut x) = Index::build(src, scratch, any_vertex, hashed && pass == Pass::Stitch, width) else {
+    let poll = Poll::new(poll);
+    let Some(mut x) = Index::build(src, scratch, any_vertex, hashed && pass == Pass::Stitch, width, poll)
+    else {
         copy(src, dst, &mut stats);
         return stats;
     };

@@ -39,6 +39,7 @@ pub(super) fn order(
         x.take(f);
         tour.push(x, f, end);
         cur = x.point(exit(x, f, end));
+        x.poll.tick(32);
     }
     tour.improve(x, start);
     // Drawn in the tour's order; a loop that passes exactly
@@ -51,6 +52,7 @@ pub(super) fn order(
         if !x.emitted(f) {
             walk.emit_spliced(x, dst, f, end, stats);
         }
+        x.poll.tick(32);
     }
     // A loop the tour left to a splice that this drawing order
     // reached too deep (or not at all): drawn after the tour.
@@ -189,6 +191,7 @@ impl Tour {
     pub(super) fn measure_all(&self, x: &mut Index<'_, '_>) {
         for k in 0..self.len.saturating_sub(1) {
             self.measure(x, k);
+            x.poll.tick(1);
         }
     }
 
@@ -269,6 +272,7 @@ impl Tour {
         let chain = if near.is_some() { OR_CHAIN } else { 1 };
         let mut moved = false;
         for (len, i) in (1..=chain).flat_map(|len| (1..n.saturating_sub(len - 1)).map(move |i| (len, i))) {
+            x.poll.tick(8);
             if *budget == 0 {
                 break;
             }
@@ -293,6 +297,7 @@ impl Tour {
                     return;
                 }
                 *budget = budget.saturating_sub(1);
+                x.poll.tick(1);
                 let a = self.ends(x, k).1;
                 let b = (k + 1 < n).then(|| self.ends(x, k + 1).0);
                 let old = if k + 1 < n { self.jump(&x.w, k) } else { 0.0 };
@@ -367,6 +372,7 @@ impl Tour {
         let [gx, gy] = near.cells;
         let mut here = park;
         for k in 0..n {
+            x.poll.tick(32);
             let [cx, cy] = near.coords(here);
             let mut best: Option<(f32, usize)> = None;
             let side = 1.0 / near.scale;
@@ -382,11 +388,13 @@ impl Tour {
                     let mut xx = x0;
                     while xx <= x1 {
                         *budget = budget.saturating_sub(1);
+                        x.poll.tick(1);
                         let c = near.heads + xx + gx * yy;
                         // Walk the cell's list, unlinking the placed ends.
                         let (mut prev, mut at) = (NONE, x.w.get(c));
                         while at != NONE {
                             *budget = budget.saturating_sub(1);
+                            x.poll.tick(1);
                             let p = at as usize;
                             let next = x.w.get(x.links + p);
                             if near.pos(x, p) < k {
@@ -518,6 +526,7 @@ impl Tour {
         };
         let mut any = false;
         for i in 0..n - 1 {
+            x.poll.tick(8);
             if *budget == 0 {
                 break;
             }
@@ -545,6 +554,7 @@ impl Tour {
                                 return;
                             }
                             *budget = budget.saturating_sub(1);
+                            x.poll.tick(1);
                             if try_j(x, j) {
                                 found = Some(j);
                             }
@@ -555,6 +565,7 @@ impl Tour {
                 }
                 None => (i + 2..n.min(i + 2 + window)).find(|&j| {
                     *budget = budget.saturating_sub(1);
+                    x.poll.tick(1);
                     try_j(x, j)
                 }),
             };
@@ -579,6 +590,7 @@ impl Tour {
                         return;
                     }
                     *budget = budget.saturating_sub(1);
+                    x.poll.tick(1);
                     let old = self.jump(&x.w, l - 1) + before;
                     let out_l1 = self.ends(x, l - 1).1;
                     if better(old, out_l1, out_i, Some((x.point(c), x.point(e1)))) {
@@ -651,6 +663,7 @@ impl Tour {
         for k in 0..self.len {
             let (end, _) = self.get(&x.w, k);
             let f = x.frag_of(end);
+            x.poll.tick(2);
             if x.is_loop(f) {
                 let next = if k + 1 < self.len { Some(self.ends(x, k + 1).0) } else { None };
                 let into = |v: Packed| prev.map_or_else(|| m.first_jump(start, v), |p| m.d(p, v));
@@ -658,6 +671,7 @@ impl Tour {
                 let (from, to) = x.span(f);
                 let mut best = (cost(x.point(end)), end);
                 for i in from..to {
+                    x.poll.tick(2);
                     let v = x.point(i);
                     // Either jump alone surely as long as the best (as in
                     // `two_opt`): no shorter, without a square root.
@@ -731,6 +745,7 @@ impl Near {
         let at = |q: Packed| Metric::at(&view, shift, q);
         let (mut lo, mut hi) = ([f32::MAX; 2], [f32::MIN; 2]);
         for k in 0..n {
+            x.poll.tick(1);
             let (e, o) = tour.get(&x.w, k);
             for p in [e, o] {
                 let s = at(x.point(p));
@@ -765,6 +780,7 @@ impl Near {
             x.w.set(near.heads + c, NONE);
         }
         for k in 0..n {
+            x.poll.tick(1);
             let (e, o) = tour.get(&x.w, k);
             for p in [e, o] {
                 let c = near.cell_of(at(x.point(p)));
@@ -830,6 +846,7 @@ impl Near {
                     let p = at as usize;
                     at = x.w.get(x.links + p);
                     *budget = budget.saturating_sub(1);
+                    x.poll.tick(1);
                     visit(x, p, budget);
                 }
             }
@@ -900,6 +917,7 @@ pub(super) fn splice_walk(
         };
         let q = x.point(i);
         visit(q);
+        x.poll.tick(2);
         if depth < SPLICE_DEPTH
             && let Some(s) = x.loop_at(q)
             && let Some(slot) = stack.get_mut(depth)

@@ -18,6 +18,7 @@ pub(super) fn stitch(x: &mut Index<'_, '_>, walk: &mut Walk, dst: &mut Geometry<
             if odd && x.odd == Some(0) {
                 break;
             }
+            x.poll.tick(1);
             if x.drawn(f) {
                 continue;
             }
@@ -40,6 +41,7 @@ pub(super) fn stitch(x: &mut Index<'_, '_>, walk: &mut Walk, dst: &mut Geometry<
             {
                 walk.take(x, dst, next, true, stats);
                 steps += 1;
+                x.poll.tick(16);
             }
             walk.out.finish(dst, stats);
         }

@@ -388,15 +388,21 @@ impl<'g> Source<'g> {
 
     /// The smallest box of codes holding every point (lowest, highest
     /// corner); `None` with no points.
-    pub(crate) fn extent(&self) -> Option<[Packed; 2]> {
-        let mut codes = self.points.iter().flat_map(|p| p.iter()).map(unpack);
-        let first = codes.next()?;
-        Some(codes.fold([first, first], |[lo, hi], q| {
-            [
-                [lo[0].min(q[0]), lo[1].min(q[1]), lo[2].min(q[2])],
-                [hi[0].max(q[0]), hi[1].max(q[1]), hi[2].max(q[2])],
-            ]
-        }))
+    /// `poll` is called every 1,024 points (for a board that keeps its
+    /// output fed meanwhile).
+    pub(crate) fn extent(&self, poll: &mut dyn FnMut()) -> Option<[Packed; 2]> {
+        let mut box_: Option<[Packed; 2]> = None;
+        for points in self.points {
+            for chunk in points.chunks(1024) {
+                for q in chunk.iter().map(unpack) {
+                    let [lo, hi] = box_.get_or_insert([q, q]);
+                    *lo = [lo[0].min(q[0]), lo[1].min(q[1]), lo[2].min(q[2])];
+                    *hi = [hi[0].max(q[0]), hi[1].max(q[1]), hi[2].max(q[2])];
+                }
+                poll();
+            }
+        }
+        box_
     }
 
     /// The fixed point shift.

@@ -151,7 +151,7 @@ proptest::proptest! {
             }
         }
         let mut scratch = vec![0u8; 16 * points + 4096];
-        let mut x = Index::build(Source::one(&src), &mut scratch, false, true, Width::Fit).expect("room");
+        let mut x = Index::build(Source::one(&src), &mut scratch, false, true, Width::Fit, Poll::none()).expect("room");
         for f in (0..lens.len()).step_by(3) {
             x.take(f);
         }
@@ -190,7 +190,7 @@ proptest::proptest! {
             let mut tours = Vec::new();
             for afresh in [false, true] {
                 let mut scratch = vec![0u8; 64 * 1024];
-                let mut x = Index::build(Source::one(&src), &mut scratch, true, false, Width::Fit).expect("room");
+                let mut x = Index::build(Source::one(&src), &mut scratch, true, false, Width::Fit, Poll::none()).expect("room");
                 let mut tour = Tour { base: x.tour_base(), len: 0, metric };
                 for f in 0..x.frags {
                     let end = x.span(f).0;
@@ -240,7 +240,7 @@ proptest::proptest! {
             let mut tours = Vec::new();
             for afresh in [false, true] {
                 let mut scratch = vec![0u8; 64 * 1024];
-                let mut x = Index::build(Source::one(&src), &mut scratch, true, false, Width::Fit).expect("room");
+                let mut x = Index::build(Source::one(&src), &mut scratch, true, false, Width::Fit, Poll::none()).expect("room");
                 let mut tour = Tour { base: x.tour_base(), len: 0, metric };
                 for (f, (_, at)) in loops.iter().enumerate() {
                     let (from, to) = x.span(f);
@@ -261,7 +261,7 @@ proptest::proptest! {
 proptest::proptest! {
     #![proptest_config(proptest::prelude::ProptestConfig::with_cases(300))]
     #[test]
-    fn stitching_in_hashed_buckets_or_u16_words_equals_stitching_in_cells(
+    fn stitching_in_hashed_buckets_u16_words_or_any_room_equals_stitching_in_cells(
         segs in proptest::collection::vec(([0u16..6, 0u16..6, 0u16..3], [0u16..6, 0u16..6, 0u16..3], 0u8..8), 1..120),
     ) {
         // Segments, dots and three-point fragments on a small lattice:
@@ -275,20 +275,25 @@ proptest::proptest! {
         // The starts, two links a fragment, a list for every other end.
         let tight = 2 * (frags + 2 * frags + frags);
         proptest::prop_assert!(matches!(
-            Index::build(Source::one(&src), &mut vec![0u8; tight], false, true, Width::Fit).map(|x| x.w),
+            Index::build(Source::one(&src), &mut vec![0u8; tight], false, true, Width::Fit, Poll::none()).map(|x| x.w),
             Some(Words::Narrow(_))
         ));
         let mut out = Vec::new();
-        for (hashed, bytes) in [(true, 16 * 1024), (false, 16 * 1024), (true, tight)] {
+        // (The engine keeps a recording in the slice memory's tail through
+        // a commit when the head holds `stitch_reserve`: the stitch must
+        // not depend on how much more it would have had.)
+        let reserve = stitch_reserve(frags, src.len());
+        for (hashed, bytes) in [(true, 16 * 1024), (false, 16 * 1024), (true, tight), (true, reserve), (true, reserve + 7)] {
             let mut p2 = store(512);
             let mut dst = Geometry::new(&mut p2);
             let mut scratch = vec![0u8; bytes];
-            let st = chain_on(Source::one(&src), &mut dst, &mut scratch, [0; 3], 0.0, Pass::Stitch, hashed, Width::Fit);
+            let st = chain_on(Source::one(&src), &mut dst, &mut scratch, [0; 3], 0.0, Pass::Stitch, hashed, Width::Fit, &mut || {});
             proptest::prop_assert!(st.ordered);
             out.push((dst.commands().collect::<Vec<_>>(), st.polylines, st.culled_dots, st.duplicate_segments));
         }
-        proptest::prop_assert_eq!(&out[0], &out[1]);
-        proptest::prop_assert_eq!(&out[0], &out[2]);
+        for o in &out[1..] {
+            proptest::prop_assert_eq!(&out[0], o);
+        }
     }
 }
 
@@ -444,7 +449,7 @@ proptest::proptest! {
         push_fragments(&mut src, &frags);
         for metric in metrics() {
             let mut scratch = vec![0u8; 64 * 1024];
-            let mut x = Index::build(Source::one(&src), &mut scratch, true, false, Width::Fit).expect("room");
+            let mut x = Index::build(Source::one(&src), &mut scratch, true, false, Width::Fit, Poll::none()).expect("room");
             x.relink(false);
             let mut tour = Tour { base: x.tour_base(), len: 0, metric };
             for f in 0..x.frags {
@@ -684,7 +689,7 @@ proptest::proptest! {
                     let mut dst = Geometry::new(&mut p2);
                     let mut scratch = vec![0u8; room(width, spare)];
                     let pass = Pass::Order(metric);
-                    let st = chain_on(Source::one(&src), &mut dst, &mut scratch, start, 0.0, pass, false, width);
+                    let st = chain_on(Source::one(&src), &mut dst, &mut scratch, start, 0.0, pass, false, width, &mut || {});
                     proptest::prop_assert!(st.ordered);
                     out.push((dst.commands().collect::<Vec<_>>(), st));
                 }
@@ -711,7 +716,8 @@ fn the_order_pass_takes_u16_words_only_where_u32_words_leave_no_cell() {
     assert_eq!(wide_least, 4 * (4 * 40 + 200 + 7 + 1));
     for (bytes, narrow) in [(wide_least, false), (wide_least - 4, true), (order_reserve(40, 200), true)] {
         let mut scratch = vec![0u8; bytes];
-        let x = Index::build(Source::one(&src), &mut scratch, true, false, Width::Fit).expect("room");
+        let x = Index::build(Source::one(&src), &mut scratch, true, false, Width::Fit, Poll::none())
+            .expect("room");
         assert_eq!(matches!(x.w, Words::Narrow(_)), narrow, "{bytes} bytes");
     }
     // The reserve: u16 words, a cell for every four points.
