@@ -1571,6 +1571,7 @@ fn board_receives(
             frame.is_replay()
         };
         frames.push((got, replayed));
+
         if rest.is_empty() && !e.split().0.busy() {
             break;
         }
@@ -1588,7 +1589,13 @@ fn a_still_picture_plays_on_from_the_tail_through_a_volume_and_its_commit() {
     let old = Vol::demo(Demo::Torus, 12, SampleType::U8);
     // Its slices fit the head and its pieces the back; or (hydrogen 32^3)
     // its pieces spill, and the stream takes all of the memory back.
-    for (new, plays) in [(Vol::demo(Demo::Sphere, 12, SampleType::U8), true), (hydrogen32(), false)] {
+    for (new, receive, plays) in [
+        (Vol::demo(Demo::Sphere, 12, SampleType::U8), true, true),
+        // Thinned into the back after it spilled: the tail comes back to
+        // the replay, which records the picture there again.
+        (Vol::demo(Demo::Gyroid, 28, SampleType::F32), false, true),
+        (hydrogen32(), false, false),
+    ] {
         let mut board = Box::new(Firmware::new());
         let mut e = Engine::new(cfg, board.buffers()).unwrap();
         e.replay_frames(true);
@@ -1599,26 +1606,29 @@ fn a_still_picture_plays_on_from_the_tail_through_a_volume_and_its_commit() {
         assert!(!replayed);
         assert_eq!(board_frame(&mut e), (first.clone(), true));
 
-        // The first command waits (the memory is all the replay's); at the
-        // next frame boundary the head comes to the stream, the tail keeps
-        // the recording.
+        // The recording is in the tail: the head is the stream's at once,
+        // and the first command is taken.
         let begin = host.begin(&new);
         answers(&mut e);
         e.feed(&begin, 1);
-        assert_eq!(nacks(&answers(&mut e)), [NackCode::Busy]);
+        assert_eq!(nacks(&answers(&mut e)), []);
+        assert_eq!(e.state(), DeviceState::Receiving);
         assert!(!e.update(2));
         let (again, replayed) = board_frame(&mut e);
         assert!(again == first && replayed, "from the tail");
-        let bytes = [begin, host.slices(&new, MAX_CHUNK).concat(), host.end()].concat();
+        let bytes = [host.slices(&new, MAX_CHUNK).concat(), host.end()].concat();
         let frames = board_receives(&mut e, &bytes, 3);
         assert_eq!(nacks(&answers(&mut e)), []);
         assert!(frames.iter().all(|(s, _)| *s == first), "the old picture plays on");
         let replayed = frames.iter().filter(|(_, r)| *r).count();
-        if plays {
-            let flags: Vec<_> = frames.iter().map(|f| f.1).collect();
-            assert_eq!(replayed, frames.len(), "every frame from the tail: {flags:?}");
+        if receive {
+            assert_eq!(replayed, frames.len(), "every frame from the tail");
         } else {
             assert!(replayed < frames.len(), "live once the spill took the tail");
+        }
+        if plays && !receive {
+            let back = frames.iter().skip_while(|f| f.1).position(|f| f.1);
+            assert!(back.is_some(), "replayed again once the tail came back");
         }
         assert_eq!(e.commit_parks(), !plays);
 

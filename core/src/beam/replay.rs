@@ -136,6 +136,11 @@ impl Kept {
         matches!(self.held, Held::Frame { from_end, .. } if self.tail > 0 && from_end <= self.tail)
     }
 
+    /// Whether picture `key`'s frame is held.
+    pub fn holds(&self, key: u32) -> bool {
+        matches!(self.held, Held::Frame { key: k, .. } if k == key)
+    }
+
     /// The tail's bytes ([`Kept::with_tail`]).
     pub fn tail(&self) -> usize {
         self.tail
@@ -171,7 +176,7 @@ impl<'m> Replay<'m> {
 
     /// Whether picture `key`'s frame is held, to play.
     pub fn holds(&self, key: u32) -> bool {
-        matches!(self.kept.held, Held::Frame { key: k, .. } if k == key)
+        self.kept.holds(key)
     }
 
     /// Whether picture `key`'s frame was found too long for the memory.

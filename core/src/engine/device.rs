@@ -263,14 +263,21 @@ impl Device<'_> {
             // comes back at the next update, between frames; all of it,
             // or the head if the two slices fit there.
             let slices = 2 * usize::from(dims[0]) * usize::from(dims[1]) * sample_type.size();
+            // (With the replay playing from the tail alone, the head is
+            // lent here already: the volume may begin at once, if it is
+            // contoured a few rows at a time and its slices fit.)
+            let head = self.cfg.defer_contouring && !slots.is_empty() && slices <= slots.len();
             let short = match self.lend {
                 Lend::Stream => false,
-                Lend::Screen => true,
+                Lend::Screen => !head,
                 Lend::Tail => slots.len() < slices,
             };
             if short {
                 self.reclaim = Some(slices);
                 return Err(NackCode::Busy);
+            }
+            if self.lend == Lend::Screen {
+                self.lend = Lend::Tail;
             }
         }
         match msg {

@@ -196,13 +196,18 @@ impl<'a> Engine<'a> {
         // (With a commit due, only a recording in the tail plays: nothing
         // else is lent to the replay then.)
         let still = dev.shown.is_some() && dev.spin_deg_per_s == 0.0 && !dev.dirty;
-        let (slots, lent) = cut(self.slices, dev.lend, dev.tail);
+        let key = still.then_some(self.generation);
+        // A frame kept in the tail plays from the tail alone: the head is
+        // the stream's meanwhile, so a volume may begin at once.
+        let tail_alone = key.is_some_and(|k| self.kept.in_tail() && self.kept.holds(k));
+        let lend = if dev.lend == Lend::Screen && tail_alone { Lend::Tail } else { dev.lend };
+        let (slots, lent) = cut(self.slices, lend, dev.tail);
         let screen = Screen {
             front: &self.front,
             transform: self.transform,
             beam: self.dev.beam,
             replay: Replay::new(lent, &mut self.kept),
-            key: still.then_some(self.generation),
+            key,
         };
         (Link { decoder: &mut self.decoder, dev: &mut self.dev, back: &mut self.back, slots }, screen)
     }
@@ -329,6 +334,22 @@ impl<'a> Engine<'a> {
         if dev.lend == Lend::Stream {
             // The stream may write anywhere.
             self.kept.clear();
+        }
+        // A transfer that took all of the memory and then thinned its
+        // surface back into the back (nothing spilled) needs the head alone
+        // again: the tail goes back to the replay, which records the
+        // picture there afresh.
+        let head = self.slices.len().saturating_sub(dev.tail);
+        let room = self.back.capacity().saturating_sub(self.back.len());
+        if dev.lend == Lend::Stream
+            && !all
+            && dev.replay_frames
+            && dev.cfg.defer_contouring
+            && dev.shown.is_some()
+            && !dev.commit
+            && dev.stream.fits_head(head, room)
+        {
+            dev.lend = Lend::Tail;
         }
     }
 

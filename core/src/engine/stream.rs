@@ -307,6 +307,16 @@ impl<'a> Stream<'a> {
         w
     }
 
+    /// Whether a transfer under way needs no more than the head of the
+    /// slice memory (`head` bytes) now, the back having `room` points
+    /// left: its two slices fit there, nothing is spilled, and the next row
+    /// would not wait for the whole memory.
+    pub(crate) fn fits_head(&self, head: usize, room: usize) -> bool {
+        self.transfer.is_some_and(|t| {
+            2 * t.spec.slice_bytes() <= head && !self.spills() && room > Self::row_bound(&t.spec)
+        })
+    }
+
     /// Whether the spill holds anything.
     pub(crate) fn spills(&self) -> bool {
         self.spill.is_some_and(|(_, h)| h.len() > 0)
