@@ -175,14 +175,23 @@ impl Inbox {
 }
 
 /// Between two half-buffer refills: rows of the pending contouring (for
-/// [`CONTOUR_CYCLES`]), or feed what arrived; send the answers.
-fn serve(link: &mut Link<'_, '_>, rx: &mut Rx, inbox: &mut Inbox, tx: &mut Tx, timing: &mut Timing) {
+/// [`CONTOUR_CYCLES`]), or feed what arrived; send the answers. `refill`
+/// refills a free half of the output, if any, from inside a long pass (a
+/// thinning of the surface, several milliseconds).
+fn serve(
+    link: &mut Link<'_, '_>,
+    rx: &mut Rx,
+    inbox: &mut Inbox,
+    tx: &mut Tx,
+    timing: &mut Timing,
+    refill: &mut dyn FnMut(),
+) {
     let busy = link.busy();
     if busy || !inbox.bytes(rx).is_empty() {
         let receiving = link.state() == DeviceState::Receiving;
         let t0 = clock::cycles();
         if busy {
-            link.contour_while(|_| clock::cycles().wrapping_sub(t0) < CONTOUR_CYCLES);
+            link.contour_polling(|_| clock::cycles().wrapping_sub(t0) < CONTOUR_CYCLES, refill);
         } else {
             let n = link.feed(inbox.bytes(rx), clock::now_ms());
             inbox.consume(n);
@@ -196,6 +205,16 @@ fn serve(link: &mut Link<'_, '_>, rx: &mut Rx, inbox: &mut Inbox, tx: &mut Tx, t
         }
     }
     answer(link, tx);
+}
+
+/// Refill a free half of the output from `frame`, if one is free (never
+/// waiting): from inside a long pass of the engine. (Never inlined: the
+/// profile of the dark stretches, `scripts/firmware-dark`, names it.)
+#[inline(never)]
+fn refill(out: &mut board::Streaming, frame: &mut impl isoscope_core::output::SampleSource) {
+    if out.ready() && out.fill_from(frame).is_err() {
+        board::fault();
+    }
 }
 
 /// The longest stretches the main loop spent away from the output, in core
@@ -370,12 +389,14 @@ fn run(board: board::Board, engine: &mut Engine<'static>) -> ! {
                     board::fault();
                 }
             }
-            serve(&mut link, &mut rx, &mut inbox, &mut tx, &mut timing);
+            serve(&mut link, &mut rx, &mut inbox, &mut tx, &mut timing, &mut || refill(&mut out, &mut frame));
             // While the DMA still plays both halves, more of a slice's
             // contouring (whole rows for a short budget a call, so the
             // refill is not late).
             while link.busy() && !out.ready() {
-                serve(&mut link, &mut rx, &mut inbox, &mut tx, &mut timing);
+                serve(&mut link, &mut rx, &mut inbox, &mut tx, &mut timing, &mut || {
+                    refill(&mut out, &mut frame)
+                });
             }
             watchdog.feed();
         }
@@ -385,7 +406,7 @@ fn run(board: board::Board, engine: &mut Engine<'static>) -> ! {
             if out.pad().is_err() {
                 board::fault();
             }
-            serve(&mut link, &mut rx, &mut inbox, &mut tx, &mut timing);
+            serve(&mut link, &mut rx, &mut inbox, &mut tx, &mut timing, &mut || {});
             watchdog.feed();
         }
         // The first frame of a new picture counts it: its refresh rate, the

@@ -453,7 +453,7 @@ impl<'a> Engine<'a> {
                 let coarser = if stitched.cut == 0 { None } else { shown.stride.coarser() };
                 let Some(coarser) = coarser else { break (stitched, then) };
                 shown.stride = coarser;
-                crate::path::thin(back, &mut spill, &shown.stride);
+                crate::path::thin(back, &mut spill, &shown.stride, &mut poll);
             }
         };
         let (stitched, then) = stitched;
@@ -716,7 +716,15 @@ impl Link<'_, '_> {
     /// keeps one (making the contourer for a call costs about as much as a
     /// short row, so a call should do more than one when it can).
     pub fn contour_while(&mut self, more: impl FnMut(usize) -> bool) -> bool {
-        self.dev.stream.work_while(self.slots, self.back, more)
+        self.contour_polling(more, &mut || {})
+    }
+
+    /// As [`Link::contour_while`], calling `poll` as a long pass over the
+    /// whole surface goes on inside a row (thinning it when it outgrows
+    /// the memory: several milliseconds on a board), for a board to refill
+    /// its output from (never waiting).
+    pub fn contour_polling(&mut self, more: impl FnMut(usize) -> bool, poll: &mut dyn FnMut()) -> bool {
+        self.dev.stream.work_while(self.slots, self.back, more, poll)
     }
 
     /// Move answer bytes for the UART into `out`; returns how many.

@@ -155,6 +155,8 @@ pub(crate) struct Stream<'a> {
 /// plane is left is it cut, and what is kept is still stitched and
 /// ordered.
 struct Keep<'g, 'a, 's> {
+    /// Called as a long thinning goes on (a board refills its output).
+    poll: &'g mut dyn FnMut(),
     back: &'g mut Geometry<'a>,
     spill: &'g mut Geometry<'s>,
     /// Fragments kept so far (back and spill).
@@ -168,7 +170,13 @@ struct Keep<'g, 'a, 's> {
     slice: (usize, u16),
     /// Whether `stride` keeps that slice (asked once a row, not a command).
     live: bool,
+    /// Commands taken since `poll` was last called.
+    since_poll: u8,
 }
+
+/// Commands kept between two polls of a board's output (some 200 cycles
+/// each, with their contouring).
+const KEEP_POLL: u8 = 48;
 
 impl Keep<'_, '_, '_> {
     /// The commands that follow come from slice `index` along `axis`.
@@ -194,7 +202,7 @@ impl Keep<'_, '_, '_> {
         let Some(coarser) = self.stride.coarser() else { return false };
         self.stride = coarser;
         self.live = coarser.keeps(self.slice.0, self.slice.1);
-        *self.frags = path::thin(self.back, self.spill, &self.stride);
+        *self.frags = path::thin(self.back, self.spill, &self.stride, self.poll);
         true
     }
 }
@@ -203,6 +211,13 @@ impl CommandSink<Point3> for Keep<'_, '_, '_> {
     type Error = Infallible;
     #[inline(always)]
     fn command(&mut self, _level: usize, c: Command<Point3>) -> Result<(), Infallible> {
+        // A row of a large slice at several levels yields hundreds of
+        // commands: a board refills its output between some of them.
+        self.since_poll = self.since_poll.wrapping_add(1);
+        if self.since_poll >= KEEP_POLL {
+            self.since_poll = 0;
+            (self.poll)();
+        }
         if !self.live {
             // A slice thinned away (while it was being contoured).
             return Ok(());
@@ -457,19 +472,21 @@ impl<'a> Stream<'a> {
     /// at least one and until `cells` cells are done. Returns whether some
     /// are left.
     pub(crate) fn work(&mut self, slots: &mut [u8], geometry: &mut Geometry<'_>, cells: usize) -> bool {
-        self.work_while(slots, geometry, |done| done < cells)
+        self.work_while(slots, geometry, |done| done < cells, &mut || {})
     }
 
     /// Contour whole rows of subgrids of the pending job into `geometry`:
     /// one, then more while `more(cells done)` says so. Returns whether
     /// some are left. With the head of the slice memory alone, a row the
     /// back may not have room for waits (none is done), and the stream
-    /// asks for the whole memory ([`Stream::wants_all`]).
+    /// asks for the whole memory ([`Stream::wants_all`]). `poll` is called
+    /// as a thinning of the surface goes on (it passes over all of it).
     pub(crate) fn work_while(
         &mut self,
         slots: &mut [u8],
         geometry: &mut Geometry<'_>,
         mut more: impl FnMut(usize) -> bool,
+        poll: &mut dyn FnMut(),
     ) -> bool {
         let Some(mut t) = self.transfer else { return false };
         let Some(mut job) = t.job else { return false };
@@ -485,6 +502,7 @@ impl<'a> Stream<'a> {
             // should not pay that alone.)
             let mut done = 0usize;
             let mut sink = Keep {
+                poll,
                 back: geometry,
                 spill: &mut spill,
                 frags: &mut t.frags,
@@ -492,6 +510,7 @@ impl<'a> Stream<'a> {
                 stride: t.stride,
                 slice: (2, 0),
                 live: true,
+                since_poll: 0,
             };
             let (s0, s1) = slots.split_at(n.min(slots.len()));
             let slots = [s0, s1];
@@ -639,6 +658,7 @@ mod tests {
         let (mut back, mut spill) = (Geometry::new(&mut b), Geometry::new(&mut s));
         let mut frags = 0;
         let mut keep = Keep {
+            poll: &mut || {},
             back: &mut back,
             spill: &mut spill,
             frags: &mut frags,
@@ -646,6 +666,7 @@ mod tests {
             stride: Stride::new([2; 3], 1),
             slice: (2, 0),
             live: true,
+            since_poll: 0,
         };
         for &c in cmds {
             let _ = keep.command(0, c);

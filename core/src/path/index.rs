@@ -331,7 +331,7 @@ impl<'s, 'g> Index<'s, 'g> {
         let mut top = [0u16; 3];
         src.for_each_kind(|i, kind| {
             frags += usize::from(kind.starts() || i == 0);
-            if i % 64 == 0 {
+            if i.is_multiple_of(64) {
                 poll.tick(16);
             }
         });
@@ -403,13 +403,13 @@ impl<'s, 'g> Index<'s, 'g> {
                 w.set(k, i as u32);
                 k += 1;
             }
-            if i % 64 == 0 {
+            if i.is_multiple_of(64) {
                 poll.tick(16);
             }
         });
         for c in 0..cells {
             w.set(heads + c, NONE);
-            if c % 256 == 0 {
+            if c.is_multiple_of(256) {
                 poll.tick(16);
             }
         }
@@ -624,7 +624,7 @@ impl<'s, 'g> Index<'s, 'g> {
         };
         for c in 0..self.cells() {
             self.w.set(self.heads + c, NONE);
-            if c % 64 == 0 {
+            if c.is_multiple_of(64) {
                 self.poll.tick(4);
             }
         }

@@ -297,7 +297,7 @@ impl Tour {
                     return;
                 }
                 *budget = budget.saturating_sub(1);
-                x.poll.tick(1);
+                x.poll.tick(8);
                 let a = self.ends(x, k).1;
                 let b = (k + 1 < n).then(|| self.ends(x, k + 1).0);
                 let old = if k + 1 < n { self.jump(&x.w, k) } else { 0.0 };
@@ -394,7 +394,7 @@ impl Tour {
                         let (mut prev, mut at) = (NONE, x.w.get(c));
                         while at != NONE {
                             *budget = budget.saturating_sub(1);
-                            x.poll.tick(1);
+                            x.poll.tick(4);
                             let p = at as usize;
                             let next = x.w.get(x.links + p);
                             if near.pos(x, p) < k {
@@ -554,7 +554,7 @@ impl Tour {
                                 return;
                             }
                             *budget = budget.saturating_sub(1);
-                            x.poll.tick(1);
+                            x.poll.tick(8);
                             if try_j(x, j) {
                                 found = Some(j);
                             }
@@ -565,7 +565,7 @@ impl Tour {
                 }
                 None => (i + 2..n.min(i + 2 + window)).find(|&j| {
                     *budget = budget.saturating_sub(1);
-                    x.poll.tick(1);
+                    x.poll.tick(8);
                     try_j(x, j)
                 }),
             };
@@ -590,7 +590,7 @@ impl Tour {
                         return;
                     }
                     *budget = budget.saturating_sub(1);
-                    x.poll.tick(1);
+                    x.poll.tick(8);
                     let old = self.jump(&x.w, l - 1) + before;
                     let out_l1 = self.ends(x, l - 1).1;
                     if better(old, out_l1, out_i, Some((x.point(c), x.point(e1)))) {
@@ -846,7 +846,7 @@ impl Near {
                     let p = at as usize;
                     at = x.w.get(x.links + p);
                     *budget = budget.saturating_sub(1);
-                    x.poll.tick(1);
+                    x.poll.tick(2);
                     visit(x, p, budget);
                 }
             }

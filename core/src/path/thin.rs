@@ -72,7 +72,15 @@ impl Stride {
 ///
 /// A piece that lies in several slices (a dot at a grid node, a line along
 /// a grid line) stays if any of them does.
-pub(crate) fn thin(back: &mut Geometry<'_>, spill: &mut Geometry<'_>, stride: &Stride) -> u32 {
+///
+/// `poll` is called every 64 pieces (for a board that keeps its output
+/// fed meanwhile: this passes over the whole surface).
+pub(crate) fn thin(
+    back: &mut Geometry<'_>,
+    spill: &mut Geometry<'_>,
+    stride: &Stride,
+    poll: &mut dyn FnMut(),
+) -> u32 {
     let old = back.len();
     let room = back.capacity();
     let shift = back.shift().min(12);
@@ -81,7 +89,12 @@ pub(crate) fn thin(back: &mut Geometry<'_>, spill: &mut Geometry<'_>, stride: &S
         if i < old { back.get(i) } else { spill.get(i - old) }
     };
     let (mut r, mut w, mut kept) = (0usize, 0usize, 0u32);
+    let mut pieces = 0u32;
     while let Some((first, _)) = read(back, spill, r) {
+        pieces = pieces.wrapping_add(1);
+        if pieces.is_multiple_of(64) {
+            poll();
+        }
         // The piece: `r` and the `Line`s after it.
         let mut end = r + 1;
         // Axes along which every point so far is at `first`'s whole voxel.
@@ -196,7 +209,7 @@ mod tests {
                         }
                     }
                 }
-                let kept = thin(&mut back, &mut spill, &stride);
+                let kept = thin(&mut back, &mut spill, &stride, &mut || {});
                 let wanted = (0..40u16).filter(|&i| stride.keeps(usize::from(i % 3), index(i))).count();
                 assert_eq!(kept as usize, wanted, "{stride:?}, room {room}");
                 let s = Source::two(&back, &spill);
@@ -218,7 +231,7 @@ mod tests {
         assert!(back.push_raw([whole(1), whole(3), 21], Kind::Line));
         assert!(back.push_raw([whole(3), whole(3), whole(3)], Kind::Dot));
         let four = Stride { every: 4, anchor: [0; 3], most: 100 };
-        assert_eq!(thin(&mut back, &mut spill, &four), 1);
+        assert_eq!(thin(&mut back, &mut spill, &four, &mut || {}), 1);
         assert_eq!(back.get(0), Some(([whole(3), whole(5), whole(4)], Kind::Dot)));
         assert_eq!(back.len(), 1);
     }
