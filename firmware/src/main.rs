@@ -337,10 +337,7 @@ fn run(board: board::Board, engine: &mut Engine<'static>) -> ! {
         report.rate(rate, engine.refresh_hz());
         let t0 = clock::cycles();
         let redrawn = engine.update_playing(clock::now_ms(), &mut |frame| {
-            // A free half, if any (never waiting for one).
-            if out.ready() && out.fill_from(frame).is_err() {
-                board::fault();
-            }
+            refill(&mut out, frame);
             watchdog.feed();
         });
         // The old frame to its end: the new picture starts on a frame

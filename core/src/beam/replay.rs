@@ -141,11 +141,6 @@ impl Kept {
         matches!(self.held, Held::Frame { key: k, .. } if k == key)
     }
 
-    /// The tail's bytes ([`Kept::with_tail`]).
-    pub fn tail(&self) -> usize {
-        self.tail
-    }
-
     /// Forget the recording (its memory is written over).
     pub fn clear(&mut self) {
         self.held = Held::Nothing;

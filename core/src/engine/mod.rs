@@ -446,7 +446,7 @@ impl<'a> Engine<'a> {
                 let merge_first = pieces.len() > front.capacity();
                 let (first, then) = if merge_first { (tolerance, 0.0) } else { (0.0, tolerance) };
                 let stitched =
-                    crate::path::chain_polled(pieces, front, scratch, [0; 3], first, Pass::Stitch, &mut poll);
+                    crate::path::chain(pieces, front, scratch, [0; 3], first, Pass::Stitch, &mut poll);
                 // A picture the front cannot hold is thinned as the stream
                 // thins one the memory cannot: every other slice goes, until it
                 // fits or one slice of each plane is left.
@@ -473,7 +473,7 @@ impl<'a> Engine<'a> {
             }
             _ => Metric::Space,
         };
-        let ordered = crate::path::chain_polled(
+        let ordered = crate::path::chain(
             Source::one(front),
             back,
             scratch,

@@ -334,7 +334,7 @@ impl<'a> Stream<'a> {
 
     /// Whether the spill holds anything.
     pub(crate) fn spills(&self) -> bool {
-        self.spill.is_some_and(|(_, h)| h.len() > 0)
+        self.spilled().len() > 0
     }
 
     /// What the last transfer spilled (counted with the back's).

@@ -313,7 +313,7 @@ pub(super) struct Index<'s, 'g> {
     /// cells, spread over all of them. 0: the grid of cells (the order
     /// pass, which searches around a point).
     pub(super) buckets: usize,
-    /// Called as the work goes on ([`super::chain_polled`]).
+    /// Called as the work goes on ([`super::chain`]).
     pub(super) poll: Poll<'s>,
 }
 

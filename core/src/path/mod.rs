@@ -116,24 +116,11 @@ pub(crate) enum Pass {
 /// of points within `tolerance` voxels of their chord are merged (0:
 /// none). `start` is where the beam comes from. `scratch` should
 /// hold about 7 bytes a point; with less, the fragments are copied as they
-/// are.
-#[cfg_attr(not(test), expect(dead_code, reason = "the engine polls; the tests chain without"))]
+/// are. `poll` is called every [`POLL_WORK`] units of work or so (a unit
+/// is about a point passed over, some tens of cycles): so that a board
+/// keeps its output fed from elsewhere while a pass runs. What the pass
+/// makes does not depend on it.
 pub(crate) fn chain(
-    src: Source<'_>,
-    dst: &mut Geometry<'_>,
-    scratch: &mut [u8],
-    start: Packed,
-    tolerance: f32,
-    pass: Pass,
-) -> ChainStats {
-    chain_polled(src, dst, scratch, start, tolerance, pass, &mut || {})
-}
-
-/// [`chain`], calling `poll` every [`POLL_WORK`] units of work or so (a
-/// unit is about a point passed over, some tens of cycles): so that a
-/// board keeps its output fed from elsewhere while a pass runs. What the
-/// pass makes does not depend on it.
-pub(crate) fn chain_polled(
     src: Source<'_>,
     dst: &mut Geometry<'_>,
     scratch: &mut [u8],
@@ -145,10 +132,10 @@ pub(crate) fn chain_polled(
     chain_on(src, dst, scratch, start, tolerance, pass, pass == Pass::Stitch, Width::Fit, poll)
 }
 
-/// Units of work ([`chain_polled`]) between two polls.
+/// Units of work ([`chain`]) between two polls.
 pub(crate) const POLL_WORK: u32 = 256;
 
-/// A poll called as work is done ([`chain_polled`]). Ticked through a
+/// A poll called as work is done ([`chain`]). Ticked through a
 /// shared reference, so that a search that only reads (the walk of a list
 /// of ends) counts its work too.
 pub(crate) struct Poll<'p> {

@@ -7,6 +7,18 @@ use super::*;
 use crate::command::{Command, Point3};
 use crate::view::ViewTransform;
 
+/// [`super::chain`] with no poll.
+fn chain(
+    src: Source<'_>,
+    dst: &mut Geometry<'_>,
+    scratch: &mut [u8],
+    start: Packed,
+    tolerance: f32,
+    pass: Pass,
+) -> ChainStats {
+    super::chain(src, dst, scratch, start, tolerance, pass, &mut || {})
+}
+
 fn store(n: usize) -> Vec<u8> {
     vec![0; Geometry::bytes_for(n)]
 }
