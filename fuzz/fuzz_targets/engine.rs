@@ -56,10 +56,15 @@ fn config() -> EngineConfig {
     EngineConfig::default()
 }
 
-/// Feed all of `bytes`: at once, or, deferring, around `contour` calls.
-fn feed_all(link: &mut isoscope_core::engine::Link<'_, '_>, mut bytes: &[u8], now: u32) {
+/// Feed `bytes`: at once, or, deferring, around `contour` calls. Returns
+/// what is left when the contouring waits for the engine's update
+/// ([`Link::waits`](isoscope_core::engine::Link::waits)).
+fn feed_all<'b>(link: &mut isoscope_core::engine::Link<'_, '_>, mut bytes: &'b [u8], now: u32) -> &'b [u8] {
     let mut idle = 0;
     while !bytes.is_empty() {
+        if link.waits() {
+            return bytes;
+        }
         if link.busy() {
             link.contour(3);
             continue;
@@ -69,6 +74,20 @@ fn feed_all(link: &mut isoscope_core::engine::Link<'_, '_>, mut bytes: &[u8], no
         idle = if n == 0 { idle + 1 } else { 0 };
         assert!(idle < 2, "feed took nothing while no work was pending");
     }
+    bytes
+}
+
+/// Feed all of `bytes`, with an update whenever the contouring waits for
+/// one (a board's next frame boundary).
+fn feed_updating(e: &mut Engine<'_>, mut bytes: &[u8], now: u32) {
+    for _ in 0..64 {
+        bytes = feed_all(&mut e.split().0, bytes, now);
+        if bytes.is_empty() {
+            return;
+        }
+        e.update(now);
+    }
+    panic!("the contouring waited on after 64 updates");
 }
 
 fn surface(e: &Engine<'_>) -> Vec<Command<[u32; 3]>> {
@@ -126,12 +145,16 @@ fuzz_target!(|data: &[u8]| {
             let (mut link, mut screen) = e.split();
             let mut frame = screen.frame();
             let mut played: Vec<Sample> = frame.by_ref().take(100).collect();
-            feed_all(&mut link, c, now);
+            let rest = feed_all(&mut link, c, now);
             played.extend(frame.take(MAX_FRAME - played.len()));
             assert!(played.iter().all(|s| s.x <= 4095 && s.y <= 4095));
             assert_eq!(played, live, "the board's frame is not the engine's");
+            if !rest.is_empty() {
+                e.update(now);
+                feed_updating(&mut e, rest, now);
+            }
         } else {
-            feed_all(&mut e.split().0, c, now);
+            feed_updating(&mut e, c, now);
         }
         e.update(now);
         drain(&mut e, &mut dec);
@@ -147,9 +170,9 @@ fuzz_target!(|data: &[u8]| {
     e.replay_frames(false);
     let clean = clean_volume();
     let (delimiter, frames) = clean.split_at(1);
-    feed_all(&mut e.split().0, delimiter, now);
+    feed_updating(&mut e, delimiter, now);
     e.update(now);
-    feed_all(&mut e.split().0, frames, now);
+    feed_updating(&mut e, frames, now);
     e.update(now);
     drain(&mut e, &mut dec);
     assert_eq!(&surface(&e), expected(), "a clean volume after the noise shows something else");

@@ -123,20 +123,37 @@ impl<'a> InProcess<'a> {
     ///
     /// # Errors
     /// The board refused the command (a `Nack`).
+    ///
+    /// Contouring that waits for the engine (to fold the surface arriving,
+    /// [`Link::waits`](isoscope_core::engine::Link::waits)) gets its update at once, and a command answered
+    /// `Busy` meanwhile is sent again, as a sender would.
     fn feed(&mut self, msg: &Message<'_>) -> Result<()> {
-        let mut rest = encode(msg, &mut self.frame).map_err(|e| anyhow!("cannot encode {msg:?}: {e}"))?;
-        loop {
-            let (mut link, _) = self.engine.split();
-            while link.contour(usize::MAX) {}
-            if rest.is_empty() {
-                break;
+        let len = encode(msg, &mut self.frame).map_err(|e| anyhow!("cannot encode {msg:?}: {e}"))?.len();
+        for _ in 0..BUSY_RETRIES {
+            let mut rest = self.frame.get(..len).unwrap_or_default();
+            loop {
+                let (mut link, _) = self.engine.split();
+                while !link.waits() && link.contour(usize::MAX) {}
+                if link.waits() {
+                    self.engine.update(self.now_ms);
+                    continue;
+                }
+                if rest.is_empty() {
+                    break;
+                }
+                let n = link.feed(rest, self.now_ms);
+                rest = rest.get(n..).unwrap_or_default();
             }
-            let n = link.feed(rest, self.now_ms);
-            rest = rest.get(n..).unwrap_or_default();
+            let mut sink = [0u8; 256];
+            while self.engine.transmit(&mut sink) > 0 {}
+            match self.events() {
+                Err(e) if e.downcast_ref::<Refused>().is_some_and(|r| r.0 == NackCode::Busy) => {
+                    self.engine.update(self.now_ms);
+                }
+                r => return r,
+            }
         }
-        let mut sink = [0u8; 256];
-        while self.engine.transmit(&mut sink) > 0 {}
-        self.events()
+        Err(Refused(NackCode::Busy).into())
     }
 
     /// Read the engine's events into `loaded`; the first refusal is an
@@ -219,6 +236,11 @@ impl<'a> InProcess<'a> {
         self.events()
     }
 }
+
+/// Times [`InProcess`] sends a command again that was answered `Busy`
+/// (each after an update: the engine has folded the surface or lent the
+/// memory back by then, so once is enough).
+const BUSY_RETRIES: usize = 4;
 
 /// Frames [`InProcess::load`] feeds for `vol` with `cfg`.
 pub fn frames_for(vol: &WireVolume, cfg: &SendConfig) -> usize {

@@ -45,8 +45,10 @@ fn check(s: &Scene, max_ratio: f32) {
 #[test]
 fn hydrogen_32_is_drawn_whole_on_the_board() {
     let (host, board) = (demo(Demo::Hydrogen, 32, Memory::Host), demo(Demo::Hydrogen, 32, F407));
+    // The board stitches its pieces as they come, when its back fills:
+    // what is left for the commit is 890 polylines and pieces.
+    assert_eq!((host.chain.fragments, board.chain.fragments), (3728, 890));
     for s in [&host, &board] {
-        assert_eq!(s.chain.fragments, 3728);
         assert!(s.loaded.whole(), "{:?}", s.loaded);
         assert!(s.remarks().is_empty(), "{:?}", s.remarks());
     }
@@ -57,7 +59,9 @@ fn hydrogen_32_is_drawn_whole_on_the_board() {
     // a polyline a lobe.
     assert_eq!(board.polylines, 4);
     check(&host, 0.0232);
-    check(&board, 0.0231);
+    // (0.0231 when it stitched all its pieces at once: stitched as they
+    // come, a few more loops end apart.)
+    check(&board, 0.0253);
 }
 
 #[test]

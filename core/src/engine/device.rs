@@ -296,9 +296,9 @@ impl Device<'_> {
                 Ok(())
             }
             Message::SliceData { slice, offset, data, .. } => {
-                let r =
-                    self.stream.chunk(slots, slice, offset, data, now_ms, back, self.cfg.defer_contouring);
-                if r == Err(NackCode::Busy) {
+                let defer = self.cfg.defer_contouring;
+                let r = self.stream.chunk(slots, slice, offset, data, now_ms, back, defer);
+                if r == Err(NackCode::Busy) && !self.stream.wants_fold() {
                     // A row waits for the whole memory (next update).
                     self.reclaim = Some(usize::MAX);
                 }
@@ -306,7 +306,9 @@ impl Device<'_> {
             }
             Message::EndVolume { .. } => {
                 if !self.stream.finish(slots, back) {
-                    self.reclaim = Some(usize::MAX);
+                    if !self.stream.wants_fold() {
+                        self.reclaim = Some(usize::MAX);
+                    }
                     return Err(NackCode::Busy);
                 }
                 let t = self.stream.transfer.ok_or(NackCode::Aborted)?;

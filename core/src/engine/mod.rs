@@ -137,13 +137,13 @@ impl<'a> Engine<'a> {
         )
         .map_err(EngineError::View)?;
         let Buffers { slices, rows, front, back, scratch } = buffers;
-        let stream = Stream::new(slices.len(), rows);
+        let front = Geometry::new(front);
+        let back = Geometry::new(back);
+        let stream = Stream::new(slices.len(), rows, front.capacity());
         let tail = replay_tail(slices.len());
         if stream.slice_capacity() < 16 || stream.row_capacity() < 2 {
             return Err(EngineError::Buffers);
         }
-        let front = Geometry::new(front);
-        let back = Geometry::new(back);
         let display_capacity = front.capacity().min(back.capacity());
         Ok(Self {
             decoder: ProtocolDecoder::new(),
@@ -195,8 +195,12 @@ impl<'a> Engine<'a> {
         let dev = &self.dev;
         // (With a commit due, only a recording in the tail plays: nothing
         // else is lent to the replay then.)
-        let still = dev.shown.is_some() && dev.spin_deg_per_s == 0.0 && !dev.dirty;
-        let key = still.then_some(self.generation);
+        // (While the volume arriving has the picture's store, the picture
+        // plays from its recording alone, as it stood.)
+        let still =
+            dev.shown.is_some() && ((dev.spin_deg_per_s == 0.0 && !dev.dirty) || dev.stream.front_taken);
+        // (A picture whose store the volume has plays only if recorded.)
+        let key = still.then_some(self.generation).filter(|&k| !dev.stream.front_taken || self.kept.holds(k));
         // A frame kept in the tail plays from the tail alone: the head is
         // the stream's meanwhile, so a volume may begin at once.
         let tail_alone = key.is_some_and(|k| self.kept.in_tail() && self.kept.holds(k));
@@ -213,8 +217,21 @@ impl<'a> Engine<'a> {
     }
 
     /// Take received bytes at time `now_ms`: see [`Link::feed`].
+    ///
+    /// Not deferring ([`EngineConfig::defer_contouring`] off), a volume's
+    /// back is folded here when it must be ([`Link::waits`]), so that all
+    /// the bytes are taken; deferring, that waits for [`Engine::update`].
     pub fn feed(&mut self, bytes: &[u8], now_ms: u32) -> usize {
-        self.split().0.feed(bytes, now_ms)
+        let mut taken = 0;
+        loop {
+            taken += self.split().0.feed(bytes.get(taken..).unwrap_or_default(), now_ms);
+            if self.dev.cfg.defer_contouring || !self.dev.stream.wants_fold() {
+                return taken;
+            }
+            self.fold(&mut |_| {});
+            let mut link = self.split().0;
+            while !link.waits() && link.contour(usize::MAX) {}
+        }
     }
 
     /// Move answer bytes for the UART into `out`; returns how many.
@@ -252,12 +269,23 @@ impl<'a> Engine<'a> {
     #[inline(never)]
     pub fn update_playing(&mut self, now_ms: u32, refill: &mut dyn FnMut(&mut Player<'_>)) -> bool {
         self.dev.check_timeout(now_ms);
+        if self.dev.stream.wants_fold() {
+            self.fold(refill);
+        }
         self.reclaim(now_ms);
         let mut changed = false;
         if self.dev.commit {
             self.commit(refill);
+            self.dev.stream.front_taken = false;
             self.dev.reclaimed_ms = None;
             changed = true;
+        }
+        if self.dev.stream.front_taken {
+            // The picture on screen lives on as its recording alone (its
+            // store holds the volume arriving): a new view, beam or spin
+            // waits for the next picture.
+            self.lend(now_ms);
+            return false;
         }
         let spinning = self.dev.spin_deg_per_s != 0.0 && self.dev.shown.is_some();
         if changed || self.dev.dirty || spinning {
@@ -278,12 +306,14 @@ impl<'a> Engine<'a> {
         changed
     }
 
-    /// Whether the next [`Engine::update_playing`] commits a volume without
-    /// playing the picture on screen meanwhile (no recording of it in the
-    /// tail, or a commit that needs all of the slice memory): a board then
-    /// parks the beam for it.
+    /// Whether the next [`Engine::update_playing`] commits a volume, or
+    /// folds the back of one arriving ([`Stream::fold`]), without playing
+    /// the picture on screen meanwhile (no recording of it in the tail yet,
+    /// or a commit that needs all of the slice memory): a board then parks
+    /// the beam for it.
     pub fn commit_parks(&self) -> bool {
-        self.dev.commit && !self.commit_keeps_tail()
+        let recorded = self.kept.holds(self.generation) && self.kept.in_tail();
+        (self.dev.commit && !self.commit_keeps_tail()) || (self.dev.stream.wants_fold() && !recorded)
     }
 
     /// The rest of the frame [`Engine::update_playing`] was playing when its
@@ -335,19 +365,19 @@ impl<'a> Engine<'a> {
             // The stream may write anywhere.
             self.kept.clear();
         }
-        // A transfer that took all of the memory and then thinned its
-        // surface back into the back (nothing spilled) needs the head alone
-        // again: the tail goes back to the replay, which records the
-        // picture there afresh.
+        // A transfer that took all of the memory (its first command came
+        // while the recording was not in the tail) needs the head alone:
+        // the tail goes back to the replay, which records the picture there
+        // afresh (if the picture is still in its store).
         let head = self.slices.len().saturating_sub(dev.tail);
-        let room = self.back.capacity().saturating_sub(self.back.len());
         if dev.lend == Lend::Stream
             && !all
             && dev.replay_frames
             && dev.cfg.defer_contouring
             && dev.shown.is_some()
             && !dev.commit
-            && dev.stream.fits_head(head, room)
+            && !dev.stream.front_taken
+            && dev.stream.fits_head(head)
         {
             dev.lend = Lend::Tail;
         }
@@ -372,16 +402,59 @@ impl<'a> Engine<'a> {
         dev.reclaimed_ms = None;
     }
 
+    /// A row waits for the back to be folded into the front
+    /// ([`Stream::fold`]): the picture on screen, recorded into the slice
+    /// memory's tail first if it is not there yet (with
+    /// [`Engine::replay_frames`]; a frame too long for the tail is lost),
+    /// plays on from there through `refill` while the fold runs in the
+    /// head, and until the volume's picture replaces it.
+    fn fold(&mut self, refill: &mut dyn FnMut(&mut Player<'_>)) {
+        let key = self.generation;
+        let dev = &mut self.dev;
+        let head = self.slices.len().saturating_sub(dev.tail);
+        let (head, tail) = self.slices.split_at_mut(head);
+        if dev.replay_frames && dev.shown.is_some() && !(self.kept.holds(key) && self.kept.in_tail()) {
+            let mut replay = Replay::new(&mut *tail, &mut self.kept);
+            if let Some(mut rec) = replay.record(key) {
+                let mut live = Scheduler::new(Projected::new(&self.front, self.transform), &dev.beam);
+                while rec.fill_with(&mut live, 1024, |_| {}) == 1024 {}
+                rec.finish(live.stats());
+            }
+        }
+        let playing = self.kept.holds(key) && self.kept.in_tail();
+        if playing {
+            // The stream keeps to the head from now on.
+            dev.lend = Lend::Tail;
+        }
+        let tail: &[u8] = tail;
+        let kept: &Kept = &self.kept;
+        let mut player = if playing { replay::play(tail, kept, key) } else { None };
+        let mut polled = false;
+        let mut poll = || {
+            if let Some(p) = player.as_mut() {
+                polled = true;
+                refill(p);
+                if p.is_done() {
+                    player = replay::play(tail, kept, key);
+                }
+            }
+        };
+        poll();
+        dev.stream.fold(head, &mut self.back, &mut self.front, &mut poll);
+        self.unfinished = player.filter(|_| polled).map(|p| (key, p.mark()));
+    }
+
     /// Whether the commit due plays the picture on screen from the tail:
-    /// its recording is there, nothing spilled, and the stitch pass's
-    /// scratch fits the head.
+    /// its recording is there, and what spilled (into the head) and the
+    /// stitch pass's scratch fit the head.
     fn commit_keeps_tail(&self) -> bool {
         let dev = &self.dev;
         let head = self.slices.len().saturating_sub(dev.tail);
+        let spilled = dev.stream.spilled().len();
+        let points = self.back.len() + spilled;
         dev.lend == Lend::Tail
             && self.kept.in_tail()
-            && !dev.stream.spills()
-            && crate::path::stitch_reserve(dev.pieces as usize, self.back.len()) <= head
+            && Geometry::bytes_for(spilled) + crate::path::stitch_reserve(dev.pieces as usize, points) <= head
     }
 
     /// The received surface becomes the picture, the picture on screen
@@ -660,11 +733,13 @@ impl Link<'_, '_> {
     /// any bytes. Returns how many bytes it took: all of them, except with
     /// [`EngineConfig::defer_contouring`], where it stops after the frame
     /// that completed a slice (feed the rest once [`Link::contour`] is
-    /// done) and takes none while that work is pending.
+    /// done) and takes none while that work is pending; and except while
+    /// the contouring waits for an update ([`Link::waits`]), when it stops
+    /// after the frame that made it wait.
     pub fn feed(&mut self, bytes: &[u8], now_ms: u32) -> usize {
         self.dev.check_timeout(now_ms);
         let defer = self.dev.cfg.defer_contouring;
-        if defer && self.dev.stream.busy() {
+        if (defer && self.dev.stream.busy()) || self.dev.stream.waits() {
             return 0;
         }
         for (n, &b) in bytes.iter().enumerate() {
@@ -673,7 +748,7 @@ impl Link<'_, '_> {
                 Some(Ok(msg)) => {
                     self.dev.counters.frames = self.dev.counters.frames.wrapping_add(1);
                     self.dev.handle(msg, now_ms, self.back, self.slots);
-                    if defer && self.dev.stream.busy() {
+                    if (defer && self.dev.stream.busy()) || self.dev.stream.waits() {
                         return n + 1;
                     }
                 }
@@ -694,6 +769,14 @@ impl Link<'_, '_> {
             }
         }
         bytes.len()
+    }
+
+    /// Whether the contouring left waits for the next
+    /// [`Engine::update`] (for the slice memory, or for the back to be
+    /// folded): [`Link::contour`] does nothing until then, and a slice's
+    /// data is answered `Busy`.
+    pub fn waits(&self) -> bool {
+        self.dev.stream.waits()
     }
 
     /// Whether a completed slice still has contouring to do (with

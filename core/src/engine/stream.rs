@@ -134,6 +134,16 @@ pub(crate) struct Stream<'a> {
     rows: [&'a mut [f32]; 2],
     /// A row waited for the whole slice memory.
     wants_all: bool,
+    /// A row waited for the back to be folded into the front, which the
+    /// stream was not lent ([`Stream::fold`]).
+    wants_fold: bool,
+    /// The front was folded into this transfer: the picture on screen is
+    /// gone from it (the engine clears this when it commits).
+    pub(crate) front_taken: bool,
+    /// Points the back held after its last fold (0 before the first).
+    folded_len: usize,
+    /// Points the front holds, which a fold's output may not outgrow.
+    front_points: usize,
     /// The slot receiving slice `z`; the other holds slice `z - 1`.
     cur: usize,
     pub transfer: Option<Transfer>,
@@ -297,8 +307,19 @@ fn widen<const N: usize>(
 
 impl<'a> Stream<'a> {
     /// A stream over a slice memory of `capacity` bytes.
-    pub(crate) fn new(capacity: usize, rows: [&'a mut [f32]; 2]) -> Self {
-        Self { capacity, rows, wants_all: false, cur: 0, transfer: None, spill: None }
+    pub(crate) fn new(capacity: usize, rows: [&'a mut [f32]; 2], front_points: usize) -> Self {
+        Self {
+            capacity,
+            rows,
+            wants_all: false,
+            wants_fold: false,
+            front_taken: false,
+            folded_len: 0,
+            front_points,
+            cur: 0,
+            transfer: None,
+            spill: None,
+        }
     }
 
     /// Bytes one slice may hold.
@@ -322,19 +343,77 @@ impl<'a> Stream<'a> {
         w
     }
 
-    /// Whether a transfer under way needs no more than the head of the
-    /// slice memory (`head` bytes) now, the back having `room` points
-    /// left: its two slices fit there, nothing is spilled, and the next row
-    /// would not wait for the whole memory.
-    pub(crate) fn fits_head(&self, head: usize, room: usize) -> bool {
-        self.transfer.is_some_and(|t| {
-            2 * t.spec.slice_bytes() <= head && !self.spills() && room > Self::row_bound(&t.spec)
-        })
+    /// Where a spill that starts at byte `at` of the slice memory ends: at
+    /// the end of the head (the memory less [`super::replay_tail`]), so
+    /// that a recording in the tail outlives the transfer and its commit;
+    /// at the end of the memory for slices the head cannot hold. Fixed by
+    /// the sizes alone, so every board thins alike.
+    fn spill_end(&self, at: usize) -> usize {
+        let head = self.capacity.saturating_sub(super::replay_tail(self.capacity));
+        if at <= head { head } else { self.capacity }
     }
 
-    /// Whether the spill holds anything.
-    pub(crate) fn spills(&self) -> bool {
-        self.spilled().len() > 0
+    /// Whether a row waits for the engine (the whole memory, or a fold).
+    pub(crate) fn waits(&self) -> bool {
+        self.busy() && (self.wants_all || self.wants_fold)
+    }
+
+    /// Whether a row waits for the back to be folded
+    /// ([`Stream::fold`]) by the engine, which has the front.
+    pub(crate) fn wants_fold(&self) -> bool {
+        self.wants_fold
+    }
+
+    /// Whether the back, about to outgrow its room, may be folded into
+    /// the front now: nothing spilled yet, a quarter of it new since the
+    /// last fold (each fold then gains), the front holds it, and the
+    /// stitch pass's scratch fits what the head of the slice memory leaves
+    /// beside the two slices from `at` on. Decided on these sizes alone,
+    /// never on whether the front or the whole memory is at hand, so that
+    /// every board folds at the same command.
+    fn may_fold(&self, back: &Geometry<'_>, frags: u32, spilled: usize, at: usize) -> bool {
+        let head = self.capacity.saturating_sub(super::replay_tail(self.capacity));
+        let fresh = back.len().saturating_sub(self.folded_len);
+        spilled == 0
+            && fresh >= back.capacity() / 4
+            && back.len() <= self.front_points
+            && path::stitch_reserve(frags as usize, back.len()) <= head.saturating_sub(at)
+    }
+
+    /// Stitch the back's pieces into maximal polylines (no merging: each
+    /// segment stays in its slice, so thinning still finds it,
+    /// [`path::thin`]) in the front, which then becomes the back: a
+    /// volume's pieces stitched take a third less room or so, and its rows
+    /// go on into the room freed ([`Stream::wants_fold`]). The picture on
+    /// screen is gone from the front after it (`front_taken`): a board
+    /// plays it on from its recording. The stitch pass's scratch is the
+    /// stream's part of the slice memory, `slots`, past the two slices;
+    /// `poll` is called as it goes on.
+    pub(crate) fn fold<'g>(
+        &mut self,
+        slots: &mut [u8],
+        back: &mut Geometry<'g>,
+        front: &mut Geometry<'g>,
+        poll: &mut dyn FnMut(),
+    ) {
+        self.wants_fold = false;
+        let at = self.spill.map_or(slots.len(), |(at, _)| at);
+        let Some(t) = self.transfer.as_mut() else { return };
+        let scratch = slots.get_mut(at..).unwrap_or_default();
+        let stitched =
+            path::chain(path::Source::one(back), front, scratch, [0; 3], 0.0, path::Pass::Stitch, poll);
+        core::mem::swap(back, front);
+        front.reset(front.shift());
+        t.frags = stitched.polylines;
+        self.folded_len = back.len();
+        self.front_taken = true;
+    }
+
+    /// Whether a transfer under way needs no more than the head of the
+    /// slice memory (`head` bytes): its two slices fit there (its spill
+    /// then stays there too, [`Stream::spill_end`]).
+    pub(crate) fn fits_head(&self, head: usize) -> bool {
+        self.transfer.is_some_and(|t| 2 * t.spec.slice_bytes() <= head)
     }
 
     /// What the last transfer spilled (counted with the back's).
@@ -351,7 +430,8 @@ impl<'a> Stream<'a> {
             (None, Some(spill)) => spill,
             _ => (0, Held::default()),
         };
-        let held = Geometry::move_to_front(slots, at, held);
+        let end = self.spill_end(at).min(slots.len());
+        let held = Geometry::move_to_front(slots.get_mut(..end).unwrap_or_default(), at, held);
         let (store, rest) = slots.split_at_mut(Geometry::bytes_for(held.len()).min(slots.len()));
         (Geometry::lent(store, held), rest)
     }
@@ -390,6 +470,8 @@ impl<'a> Stream<'a> {
         });
         // The spill starts after the transfer's two slots.
         self.spill = Some((2 * self.slot_bytes(), Held::empty(shift)));
+        self.folded_len = 0;
+        self.wants_fold = false;
     }
 
     /// Whether a completed slice still has contouring to do.
@@ -461,7 +543,7 @@ impl<'a> Stream<'a> {
     /// slice memory ([`Stream::wants_all`]).
     pub(crate) fn finish(&mut self, slots: &mut [u8], geometry: &mut Geometry<'_>) -> bool {
         while self.work(slots, geometry, usize::MAX) {
-            if self.wants_all {
+            if self.wants_all || self.wants_fold {
                 return false;
             }
         }
@@ -477,10 +559,12 @@ impl<'a> Stream<'a> {
 
     /// Contour whole rows of subgrids of the pending job into `geometry`:
     /// one, then more while `more(cells done)` says so. Returns whether
-    /// some are left. With the head of the slice memory alone, a row the
-    /// back may not have room for waits (none is done), and the stream
-    /// asks for the whole memory ([`Stream::wants_all`]). `poll` is called
-    /// as a thinning of the surface goes on (it passes over all of it).
+    /// some are left. A row waits (none is done) when the back may not
+    /// have room for it and may be folded ([`Stream::wants_fold`]: the
+    /// engine folds it at the next update), or, with the head of the slice
+    /// memory alone, when it may not be (the stream asks for the whole
+    /// memory, [`Stream::wants_all`]). `poll` is called as a thinning of
+    /// the surface goes on (it passes over all of it).
     pub(crate) fn work_while(
         &mut self,
         slots: &mut [u8],
@@ -494,8 +578,12 @@ impl<'a> Stream<'a> {
         let mut left = true;
         let n = self.slot_bytes();
         let (at, held) = self.spill.unwrap_or((2 * n, Held::empty(geometry.shift())));
-        let head_only = slots.len() < self.capacity;
+        let end = self.spill_end(at);
+        // With the head alone lent, all the spill may have (else the row
+        // waits for the whole memory: slices the head cannot hold).
+        let short = slots.len() < end;
         let (slots, rest) = slots.split_at_mut(at.min(slots.len()));
+        let rest = rest.get_mut(..end.saturating_sub(at)).unwrap_or_default();
         let mut spill = Geometry::lent(rest, held);
         if let Ok(mut rc) = RowContourer::new::<Infallible>(t.spec.levels.as_slice(), Traversal::Compiled) {
             // (Making the contourer clears its 2 KB of scratch: a short row
@@ -518,11 +606,15 @@ impl<'a> Stream<'a> {
                 // More than a row can yield, and one: the back keeps the
                 // row's every command, and never at its last slot, as it
                 // does with the whole memory lent (see `Keep`).
-                if head_only
-                    && sink.back.capacity().saturating_sub(sink.back.len()) <= Self::row_bound(&t.spec)
-                {
-                    self.wants_all = true;
-                    break;
+                if sink.back.capacity().saturating_sub(sink.back.len()) <= Self::row_bound(&t.spec) {
+                    if self.may_fold(sink.back, *sink.frags, sink.spill.len(), at) {
+                        self.wants_fold = true;
+                        break;
+                    }
+                    if short {
+                        self.wants_all = true;
+                        break;
+                    }
                 }
                 match Self::row(&t.spec, &mut job, &mut rc, slots, &mut self.rows, &mut sink, &mut stats) {
                     Some(n) => done = done.saturating_add(n),

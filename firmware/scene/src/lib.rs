@@ -89,7 +89,12 @@ pub fn engine_config() -> EngineConfig {
 pub fn feed_all(engine: &mut Engine<'_>, mut bytes: &[u8], now_ms: u32) {
     loop {
         let (mut link, _) = engine.split();
-        while link.contour(usize::MAX) {}
+        while !link.waits() && link.contour(usize::MAX) {}
+        if link.waits() {
+            // (To fold the surface: a volume larger than the boot's.)
+            engine.update(now_ms);
+            continue;
+        }
         if bytes.is_empty() {
             return;
         }
