@@ -639,7 +639,9 @@ impl<'a> Engine<'a> {
         dev.refresh();
         let blank = stats.blank_length / stats.lit_length.max(f32::MIN_POSITIVE);
         dev.event(Event::Redrawn {
-            polylines: self.front.polylines() as u32,
+            // (The order pass counted them: a walk over every point would
+            // cost a board most of a half buffer.)
+            polylines: self.chain.polylines,
             points: self.front.len() as u32,
             blank_permille: (blank * 1000.0).clamp(0.0, 60000.0) as u16,
             refresh_centi_hz: dev.refresh_centi_hz,

@@ -51,6 +51,9 @@ impl Walk {
         // Only a fragment's first point may be a dot (the rest are lines).
         let dot = x.kind(from) == Kind::Dot;
         let mut emit = |i: usize| {
+            // (A fragment may be a long polyline: stitched as a volume
+            // arrived, [`crate::path::thin`].)
+            x.poll.tick(1);
             let q = x.point(i);
             self.out.point(dst, q, dot && i == from, stats);
             if self.cur != q {
