@@ -80,7 +80,7 @@ impl Stride {
 /// of it is written as the runs of segments kept, each a polyline of its
 /// own (a loop's run across its first point joined into one).
 ///
-/// `poll` is called every 64 pieces (for a board that keeps its output
+/// `poll` is called every 256 points passed over (for a board that keeps its output
 /// fed meanwhile: this passes over the whole surface).
 pub(crate) fn thin(
     back: &mut Geometry<'_>,
@@ -96,7 +96,14 @@ pub(crate) fn thin(
         if i < old { back.get(i) } else { spill.get(i - old) }
     };
     let (mut r, mut w, mut kept) = (0usize, 0usize, 0u32);
-    let mut pieces = 0u32;
+    // Points passed over since the start: `poll` every 256.
+    let mut work = 0u32;
+    let mut tick = |poll: &mut dyn FnMut()| {
+        work = work.wrapping_add(1);
+        if work.is_multiple_of(256) {
+            poll();
+        }
+    };
     // Writes stay behind reads (`w <= i` when point `i` is read), in
     // either store.
     let put = |back: &mut Geometry<'_>, spill: &mut Geometry<'_>, w: usize, q: Packed, k: Kind| {
@@ -114,15 +121,13 @@ pub(crate) fn thin(
             .any(|(axis, (&c, d))| c & whole == 0 && c == d && stride.keeps(axis, c >> shift))
     };
     while let Some((first, kind)) = read(back, spill, r) {
-        pieces = pieces.wrapping_add(1);
-        if pieces.is_multiple_of(64) {
-            poll();
-        }
+        tick(poll);
         // The piece: `r` and the `Line`s after it.
         let mut end = r + 1;
         // Axes along which every point so far is at `first`'s whole voxel.
         let mut axes = first.map(|c| c & whole == 0);
         while let Some((q, Kind::Line)) = read(back, spill, end) {
+            tick(poll);
             for ((on, c), f) in axes.iter_mut().zip(q).zip(first) {
                 *on &= c == f;
             }
@@ -135,6 +140,7 @@ pub(crate) fn thin(
             if keep {
                 kept += 1;
                 for i in r..end {
+                    tick(poll);
                     if let Some((q, k)) = read(back, spill, i) {
                         put(back, spill, w, q, k);
                     }
@@ -155,6 +161,7 @@ pub(crate) fn thin(
             let mut prev = first;
             let mut seg0 = false;
             for i in r + 1..end {
+                tick(poll);
                 let q = read(back, spill, i).map_or(prev, |(q, _)| q);
                 if keeps_segment(prev, q) {
                     seg0 |= i == r + 1;
@@ -218,6 +225,7 @@ pub(crate) fn thin(
                     // one (the segment before the last point was dropped:
                     // as many gaps as runs).
                     for j in (start..w).rev() {
+                        tick(poll);
                         if let Some((p, k)) = get(back, spill, j) {
                             put(back, spill, j + 1, p, k);
                         }
