@@ -141,6 +141,12 @@ impl Kept {
         matches!(self.held, Held::Frame { key: k, .. } if k == key)
     }
 
+    /// Whether picture `key`'s frame is held in the tail
+    /// ([`Kept::holds`] and [`Kept::in_tail`]).
+    pub fn holds_in_tail(&self, key: u32) -> bool {
+        self.holds(key) && self.in_tail()
+    }
+
     /// Forget the recording (its memory is written over).
     pub fn clear(&mut self) {
         self.held = Held::Nothing;

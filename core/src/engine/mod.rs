@@ -203,7 +203,7 @@ impl<'a> Engine<'a> {
         let key = still.then_some(self.generation).filter(|&k| !dev.stream.front_taken || self.kept.holds(k));
         // A frame kept in the tail plays from the tail alone: the head is
         // the stream's meanwhile, so a volume may begin at once.
-        let tail_alone = key.is_some_and(|k| self.kept.in_tail() && self.kept.holds(k));
+        let tail_alone = key.is_some_and(|k| self.kept.holds_in_tail(k));
         let lend = if dev.lend == Lend::Screen && tail_alone { Lend::Tail } else { dev.lend };
         let (slots, lent) = cut(self.slices, lend, dev.tail);
         let screen = Screen {
@@ -312,7 +312,7 @@ impl<'a> Engine<'a> {
     /// or a commit that needs all of the slice memory): a board then parks
     /// the beam for it.
     pub fn commit_parks(&self) -> bool {
-        let recorded = self.kept.holds(self.generation) && self.kept.in_tail();
+        let recorded = self.kept.holds_in_tail(self.generation);
         (self.dev.commit && !self.commit_keeps_tail()) || (self.dev.stream.wants_fold() && !recorded)
     }
 
@@ -413,7 +413,7 @@ impl<'a> Engine<'a> {
         let dev = &mut self.dev;
         let head = self.slices.len().saturating_sub(dev.tail);
         let (head, tail) = self.slices.split_at_mut(head);
-        if dev.replay_frames && dev.shown.is_some() && !(self.kept.holds(key) && self.kept.in_tail()) {
+        if dev.replay_frames && dev.shown.is_some() && !self.kept.holds_in_tail(key) {
             let mut replay = Replay::new(&mut *tail, &mut self.kept);
             if let Some(mut rec) = replay.record(key) {
                 let mut live = Scheduler::new(Projected::new(&self.front, self.transform), &dev.beam);
@@ -421,27 +421,15 @@ impl<'a> Engine<'a> {
                 rec.finish(live.stats());
             }
         }
-        let playing = self.kept.holds(key) && self.kept.in_tail();
-        if playing {
+        if self.kept.holds_in_tail(key) {
             // The stream keeps to the head from now on.
             dev.lend = Lend::Tail;
         }
-        let tail: &[u8] = tail;
-        let kept: &Kept = &self.kept;
-        let mut player = if playing { replay::play(tail, kept, key) } else { None };
-        let mut polled = false;
-        let mut poll = || {
-            if let Some(p) = player.as_mut() {
-                polled = true;
-                refill(p);
-                if p.is_done() {
-                    player = replay::play(tail, kept, key);
-                }
-            }
-        };
+        let mut old = Replaying::new(tail, &self.kept, key);
+        let mut poll = || old.poll(refill);
         poll();
         dev.stream.fold(head, &mut self.back, &mut self.front, &mut poll);
-        self.unfinished = player.filter(|_| polled).map(|p| (key, p.mark()));
+        self.unfinished = old.unfinished();
     }
 
     /// Whether the commit due plays the picture on screen from the tail:
@@ -471,20 +459,9 @@ impl<'a> Engine<'a> {
         let Some(shown) = dev.shown.as_mut() else { return };
         let capacity = slices.len();
         let (slots, lent) = cut(slices, dev.lend, dev.tail);
-        let lent: &[u8] = lent;
-        let kept: &Kept = kept;
         // The frame on screen, played over and over while the passes run.
-        let mut player = replay::play(lent, kept, key);
-        let mut polled = false;
-        let mut poll = || {
-            if let Some(p) = player.as_mut() {
-                polled = true;
-                refill(p);
-                if p.is_done() {
-                    player = replay::play(lent, kept, key);
-                }
-            }
-        };
+        let mut old = Replaying::new(lent, kept, key);
+        let mut poll = || old.poll(refill);
         // A half buffer's worth before anything else: the frame before
         // ended just now.
         poll();
@@ -555,7 +532,7 @@ impl<'a> Engine<'a> {
             Pass::Order(metric),
             &mut poll,
         );
-        *unfinished = player.filter(|_| polled).map(|p| (key, p.mark()));
+        *unfinished = old.unfinished();
         core::mem::swap(front, back);
         back.reset(back.shift());
         *chain = ChainStats {
@@ -712,6 +689,41 @@ impl<'a> Engine<'a> {
     /// Counts since start.
     pub fn counters(&self) -> Counters {
         self.dev.counters
+    }
+}
+
+/// The picture on screen played over and over from its recording while a
+/// long pass runs (a fold, a commit): at each poll, `refill` takes what
+/// its output has room for, and the frame starts again when it ends.
+struct Replaying<'r> {
+    mem: &'r [u8],
+    kept: &'r Kept,
+    key: u32,
+    player: Option<Player<'r>>,
+    polled: bool,
+}
+
+impl<'r> Replaying<'r> {
+    /// Picture `key`'s frame, if `mem` holds it (else nothing plays).
+    fn new(mem: &'r [u8], kept: &'r Kept, key: u32) -> Self {
+        Self { mem, kept, key, player: replay::play(mem, kept, key), polled: false }
+    }
+
+    fn poll(&mut self, refill: &mut dyn FnMut(&mut Player<'_>)) {
+        if let Some(p) = self.player.as_mut() {
+            self.polled = true;
+            refill(p);
+            if p.is_done() {
+                self.player = replay::play(self.mem, self.kept, self.key);
+            }
+        }
+    }
+
+    /// Where the frame stood when the pass ended, if it played
+    /// ([`Engine::unfinished`]).
+    fn unfinished(self) -> Option<(u32, replay::Mark)> {
+        let key = self.key;
+        self.player.filter(|_| self.polled).map(|p| (key, p.mark()))
     }
 }
 

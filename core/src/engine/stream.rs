@@ -134,8 +134,8 @@ pub(crate) struct Stream<'a> {
     rows: [&'a mut [f32]; 2],
     /// A row waited for the whole slice memory.
     wants_all: bool,
-    /// A row waited for the back to be folded into the front, which the
-    /// stream was not lent ([`Stream::fold`]).
+    /// A row waits for the engine to fold the back into the front
+    /// ([`Stream::fold`]).
     wants_fold: bool,
     /// The front was folded into this transfer: the picture on screen is
     /// gone from it (the engine clears this when it commits).
@@ -349,8 +349,14 @@ impl<'a> Stream<'a> {
     /// at the end of the memory for slices the head cannot hold. Fixed by
     /// the sizes alone, so every board thins alike.
     fn spill_end(&self, at: usize) -> usize {
-        let head = self.capacity.saturating_sub(super::replay_tail(self.capacity));
+        let head = self.head();
         if at <= head { head } else { self.capacity }
+    }
+
+    /// Bytes of the head of the slice memory: all of it less the tail a
+    /// recording may keep ([`super::replay_tail`]).
+    fn head(&self) -> usize {
+        self.capacity.saturating_sub(super::replay_tail(self.capacity))
     }
 
     /// Whether a row waits for the engine (the whole memory, or a fold).
@@ -372,12 +378,11 @@ impl<'a> Stream<'a> {
     /// never on whether the front or the whole memory is at hand, so that
     /// every board folds at the same command.
     fn may_fold(&self, back: &Geometry<'_>, frags: u32, spilled: usize, at: usize) -> bool {
-        let head = self.capacity.saturating_sub(super::replay_tail(self.capacity));
         let fresh = back.len().saturating_sub(self.folded_len);
         spilled == 0
             && fresh >= back.capacity() / 4
             && back.len() <= self.front_points
-            && path::stitch_reserve(frags as usize, back.len()) <= head.saturating_sub(at)
+            && path::stitch_reserve(frags as usize, back.len()) <= self.head().saturating_sub(at)
     }
 
     /// Stitch the back's pieces into maximal polylines (no merging: each
