@@ -117,6 +117,36 @@ impl Vol {
         Self { dims: [d, d, d], ty, bytes, values, levels, axes: AXIS_X | AXIS_Y | AXIS_Z, every: 1 }
     }
 
+    /// This volume at the corner of slices `nx` x `ny` (at least its
+    /// own), the rest `fill` (a value below or above every level).
+    fn padded(&self, nx: u16, ny: u16, fill: f32) -> Self {
+        let [ix, iy, iz] = self.dims.map(usize::from);
+        let (nx, ny) = (usize::from(nx).max(ix), usize::from(ny).max(iy));
+        let size = self.ty.size();
+        let fill_bytes: Vec<u8> = match self.ty {
+            SampleType::U8 => vec![fill as u8],
+            SampleType::U16 => (fill as u16).to_le_bytes().to_vec(),
+            SampleType::I16 => (fill as i16).to_le_bytes().to_vec(),
+            SampleType::F32 => fill.to_le_bytes().to_vec(),
+        };
+        let (mut values, mut bytes) = (Vec::new(), Vec::new());
+        for z in 0..iz {
+            for y in 0..ny {
+                for x in 0..nx {
+                    if x < ix && y < iy {
+                        let i = (z * iy + y) * ix + x;
+                        values.push(self.values[i]);
+                        bytes.extend_from_slice(&self.bytes[i * size..(i + 1) * size]);
+                    } else {
+                        values.push(fill);
+                        bytes.extend_from_slice(&fill_bytes);
+                    }
+                }
+            }
+        }
+        Self { dims: [nx as u16, ny as u16, iz as u16], bytes, values, ..self.clone() }
+    }
+
     fn slice_bytes(&self) -> usize {
         usize::from(self.dims[0]) * usize::from(self.dims[1]) * self.ty.size()
     }
@@ -1612,11 +1642,17 @@ fn a_still_picture_plays_on_from_the_tail_through_a_volume_and_its_commit() {
     let old = Vol::demo(Demo::Torus, 12, SampleType::U8);
     // Its slices fit the head and its pieces the back; or its pieces are
     // folded on the way and spill into the head (gyroid 28^3 `f32`, which
-    // then thins, and hydrogen 32^3).
+    // then thins, and hydrogen 32^3); or its two slices (128 x 128 `u8`,
+    // 32 KB, as the MRI head's) are more than the head holds: they take
+    // all of the slice memory, the old picture plays live, and is recorded
+    // into the tail in one more frame before the commit.
+    let wide = Vol::demo(Demo::Sphere, 12, SampleType::U8).padded(128, 128, 0.0);
+    assert!(2 * wide.slice_bytes() > 65_536 - isoscope_core::engine::replay_tail(65_536));
     for (new, receive, plays) in [
         (Vol::demo(Demo::Sphere, 12, SampleType::U8), true, true),
         (Vol::demo(Demo::Gyroid, 28, SampleType::F32), true, true),
         (hydrogen32(), true, true),
+        (wide, false, true),
     ] {
         let mut board = Box::new(Firmware::new());
         let mut e = Engine::new(cfg, board.buffers()).unwrap();
@@ -1633,11 +1669,21 @@ fn a_still_picture_plays_on_from_the_tail_through_a_volume_and_its_commit() {
         let begin = host.begin(&new);
         answers(&mut e);
         e.feed(&begin, 1);
-        assert_eq!(nacks(&answers(&mut e)), []);
-        assert_eq!(e.state(), DeviceState::Receiving);
-        assert!(!e.update(2));
-        let (again, replayed) = board_frame(&mut e);
-        assert!(again == first && replayed, "from the tail");
+        if receive {
+            assert_eq!(nacks(&answers(&mut e)), []);
+            assert_eq!(e.state(), DeviceState::Receiving);
+            assert!(!e.update(2));
+            let (again, replayed) = board_frame(&mut e);
+            assert!(again == first && replayed, "from the tail");
+        } else {
+            // Slices the head cannot hold: `Busy` once, all of the memory
+            // at the next frame boundary, and the volume begins again.
+            assert_eq!(nacks(&answers(&mut e)), [NackCode::Busy]);
+            assert!(!e.update(2));
+            e.feed(&begin, 2);
+            assert_eq!(nacks(&answers(&mut e)), []);
+            assert_eq!(e.state(), DeviceState::Receiving);
+        }
         let bytes = [host.slices(&new, MAX_CHUNK).concat(), host.end()].concat();
         let frames = board_receives(&mut e, &bytes, 3);
         assert_eq!(nacks(&answers(&mut e)), []);
@@ -1648,11 +1694,14 @@ fn a_still_picture_plays_on_from_the_tail_through_a_volume_and_its_commit() {
         } else {
             assert!(replayed < frames.len(), "live once the spill took the tail");
         }
-        if plays && !receive {
-            let back = frames.iter().skip_while(|f| f.1).position(|f| f.1);
-            assert!(back.is_some(), "replayed again once the tail came back");
-        }
         assert_eq!(e.commit_parks(), !plays);
+        if plays && !receive {
+            // A frame boundary: the tail is lent to the screen, which
+            // records the old picture there as it plays it.
+            assert!(!e.update(4), "the commit waits a frame");
+            assert_eq!(board_frame(&mut e), (first.clone(), false), "recorded as it plays");
+            assert!(!e.commit_parks());
+        }
 
         // The commit: the old frame plays on, over and over, then to its end.
         let mut during = Vec::new();

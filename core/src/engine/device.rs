@@ -55,6 +55,10 @@ pub(super) struct Device<'a> {
     /// A volume is complete in the back surface: it becomes the picture at
     /// the next [`Engine::update`](super::Engine::update); until then new volume data is `Busy`.
     pub(super) commit: bool,
+    /// The commit due waited a frame for the picture on screen to be
+    /// recorded into the tail ([`Engine::update_playing`](super::Engine::update_playing)):
+    /// it waits no more.
+    pub(super) commit_waited: bool,
     pub(super) view: View,
     pub(super) spin_deg_per_s: f32,
     /// When `view.yaw` held (ms), for the spin.

@@ -153,6 +153,7 @@ impl<'a> Engine<'a> {
                 stream,
                 shown: None,
                 commit: false,
+                commit_waited: false,
                 view: cfg.view,
                 spin_deg_per_s: 0.0,
                 spin_epoch_ms: 0,
@@ -274,7 +275,13 @@ impl<'a> Engine<'a> {
         }
         self.reclaim(now_ms);
         let mut changed = false;
-        if self.dev.commit {
+        if self.records_before_commit() && self.dev.stream.spill_into_head(self.slices) {
+            // One frame more of the picture on screen, recorded into the
+            // tail as it plays (`Screen::frame`); the commit then plays it.
+            self.dev.commit_waited = true;
+            self.dev.lend = Lend::Tail;
+            self.kept.clear();
+        } else if self.dev.commit {
             self.commit(refill);
             self.dev.stream.front_taken = false;
             self.dev.reclaimed_ms = None;
@@ -313,7 +320,8 @@ impl<'a> Engine<'a> {
     /// the beam for it.
     pub fn commit_parks(&self) -> bool {
         let recorded = self.kept.holds_in_tail(self.generation);
-        (self.dev.commit && !self.commit_keeps_tail()) || (self.dev.stream.wants_fold() && !recorded)
+        (self.dev.commit && !self.commit_keeps_tail() && !self.records_before_commit())
+            || (self.dev.stream.wants_fold() && !recorded)
     }
 
     /// The rest of the frame [`Engine::update_playing`] was playing when its
@@ -433,16 +441,45 @@ impl<'a> Engine<'a> {
     }
 
     /// Whether the commit due plays the picture on screen from the tail:
-    /// its recording is there, and what spilled (into the head) and the
-    /// stitch pass's scratch fit the head.
+    /// its recording is there, what spilled lies in the head, and the
+    /// commit fits the head ([`Engine::commit_fits_head`]).
     fn commit_keeps_tail(&self) -> bool {
+        let dev = &self.dev;
+        dev.lend == Lend::Tail && self.kept.in_tail() && dev.stream.spill_in_head() && self.commit_fits_head()
+    }
+
+    /// Whether the commit due could do with the head of the slice memory
+    /// alone: what spilled and the stitch pass's scratch fit there.
+    fn commit_fits_head(&self) -> bool {
         let dev = &self.dev;
         let head = self.slices.len().saturating_sub(dev.tail);
         let spilled = dev.stream.spilled().len();
         let points = self.back.len() + spilled;
-        dev.lend == Lend::Tail
-            && self.kept.in_tail()
-            && Geometry::bytes_for(spilled) + crate::path::stitch_reserve(dev.pieces as usize, points) <= head
+        Geometry::bytes_for(spilled) + crate::path::stitch_reserve(dev.pieces as usize, points) <= head
+    }
+
+    /// Whether the commit due waits one frame, for the picture on screen
+    /// to be recorded into the tail as it plays, so that the commit can
+    /// play it on (the volume's slices took all of the slice memory, and
+    /// the recording with it, but its commit fits the head, where what
+    /// spilled is moved first: [`Stream::spill_into_head`]). Once a
+    /// commit, and only as a board plays ([`Engine::replay_frames`],
+    /// [`EngineConfig::defer_contouring`]) a still picture (a still
+    /// picture's first frame is recorded). What the
+    /// commit makes is the same either way: its passes' scratch is the
+    /// head whether or not a recording keeps the tail.
+    fn records_before_commit(&self) -> bool {
+        let dev = &self.dev;
+        dev.commit
+            && !dev.commit_waited
+            && dev.replay_frames
+            && dev.cfg.defer_contouring
+            && !self.front.is_empty()
+            && !dev.stream.front_taken
+            && dev.spin_deg_per_s == 0.0
+            && !dev.dirty
+            && !self.kept.holds_in_tail(self.generation)
+            && self.commit_fits_head()
     }
 
     /// The received surface becomes the picture, the picture on screen
@@ -456,6 +493,7 @@ impl<'a> Engine<'a> {
         let key = self.generation;
         let Self { dev, front, back, scratch: extra, slices, kept, chain, unfinished, .. } = self;
         dev.commit = false;
+        dev.commit_waited = false;
         let Some(shown) = dev.shown.as_mut() else { return };
         let capacity = slices.len();
         let (slots, lent) = cut(slices, dev.lend, dev.tail);

@@ -421,6 +421,34 @@ impl<'a> Stream<'a> {
         self.transfer.is_some_and(|t| 2 * t.spec.slice_bytes() <= head)
     }
 
+    /// Whether the last transfer's spill lies in the head of the slice
+    /// memory (it began there, [`Stream::spill_end`]), or holds nothing.
+    pub(crate) fn spill_in_head(&self) -> bool {
+        self.spill.is_none_or(|(at, h)| at <= self.head() || (h.len() == 0 && h.dropped() == 0))
+    }
+
+    /// Between transfers: move a spill that began past the head (its
+    /// slices took all of the slice memory, `slots`) into the head, laid
+    /// out as one that began at its start; returns whether it lies in the
+    /// head now. The slices it began after are done with.
+    pub(crate) fn spill_into_head(&mut self, slots: &mut [u8]) -> bool {
+        let head = self.head();
+        let Some((at, held)) = self.spill else { return true };
+        if self.spill_in_head() {
+            return true;
+        }
+        let end = self.spill_end(at);
+        if self.transfer.is_some() || end > slots.len() || Geometry::bytes_for(held.len()) > head {
+            return false;
+        }
+        let moved = Geometry::move_down(slots.get_mut(..end).unwrap_or_default(), at, held, head);
+        if moved.len() != held.len() {
+            return false;
+        }
+        self.spill = Some((0, moved));
+        true
+    }
+
     /// What the last transfer spilled (counted with the back's).
     pub(crate) fn spilled(&self) -> Held {
         self.spill.map_or_else(Held::default, |(_, h)| h)

@@ -343,15 +343,26 @@ impl<'a> Geometry<'a> {
     /// and the rest of `bytes` is free.
     pub(crate) fn move_to_front(bytes: &mut [u8], at: usize, held: Held) -> Held {
         let n = Self::points_in(bytes.len().saturating_sub(at));
+        Self::move_down(bytes, at, held, Self::bytes_for(held.len.min(n)))
+    }
+
+    /// Move the store lent `bytes[at..]` and holding `held` to be the
+    /// store lent `bytes[..to]`: it is then `Geometry::lent(&mut
+    /// bytes[..to], held)`. Empty if `to` is past the end of `bytes`, or
+    /// if `bytes[..to]` holds fewer points than `held`.
+    pub(crate) fn move_down(bytes: &mut [u8], at: usize, held: Held, to: usize) -> Held {
+        let n = Self::points_in(bytes.len().saturating_sub(at));
         let len = held.len.min(n);
         let kinds = at + 6 * n;
-        // Points first: they move down by `at` at least, past nothing the
-        // kinds still need (those lie after all `n` points).
-        if kinds + len.div_ceil(4) > bytes.len() {
+        let to_kinds = 6 * Self::points_in(to);
+        // Points first: they move down to the start, past nothing the
+        // kinds still need (those lie after all `n` points, and the
+        // kinds' new place after all the points moved).
+        if kinds + len.div_ceil(4) > bytes.len() || len > Self::points_in(to) || to > bytes.len() {
             return Held::empty(held.shift);
         }
         bytes.copy_within(at..at + 6 * len, 0);
-        bytes.copy_within(kinds..kinds + len.div_ceil(4), 6 * len);
+        bytes.copy_within(kinds..kinds + len.div_ceil(4), to_kinds);
         Held { len, ..held }
     }
 }
@@ -631,6 +642,36 @@ mod tests {
         // A store that cannot be where it is said to be holds nothing.
         let mut bytes = [0u8; 10];
         assert_eq!(Geometry::move_to_front(&mut bytes, 20, Held { len: 3, ..Held::empty(2) }).len(), 0);
+    }
+
+    #[test]
+    fn a_store_moved_down_is_the_store_lent_its_new_bytes() {
+        let kinds = [Kind::Move, Kind::Line, Kind::Dot, Kind::Loop, Kind::Line];
+        for at in [0, 1, 37, 60, 150] {
+            for n in 0..=kinds.len() {
+                for to in 0..=200 {
+                    let mut bytes: Vec<u8> = (0..200u8).collect();
+                    let mut g = Geometry::lent(&mut bytes[at..], Held::empty(5));
+                    for (i, &k) in kinds.iter().take(n).enumerate() {
+                        assert!(g.push_raw([i as u16, 1000 + i as u16, 0xFFFF - i as u16], k));
+                    }
+                    let want: Vec<_> = (0..n).map(|i| g.get(i)).collect();
+                    let held = g.held();
+                    let held = Geometry::move_down(&mut bytes, at, held, to);
+                    if Geometry::points_in(to) < n {
+                        assert_eq!(held.len(), 0, "{n} points do not fit {to} bytes");
+                        continue;
+                    }
+                    assert_eq!(held, Held { len: n, dropped: 0, broken: false, shift: 5 });
+                    let g = Geometry::lent(&mut bytes[..to], held);
+                    assert_eq!(
+                        (0..n).map(|i| g.get(i)).collect::<Vec<_>>(),
+                        want,
+                        "at {at} to {to}, {n} points"
+                    );
+                }
+            }
+        }
     }
 
     #[test]
