@@ -146,7 +146,7 @@ pub(crate) fn read_from(input: &mut Input<'_>, opts: &Options) -> Result<Loaded>
         bail!("the file holds more values than {what}");
     }
     // File order: the third axis fastest, the first slowest.
-    let (samples, dims) = permute(Samples::F32(picked), [n[2], n[1], n[0]], [2, 1, 0]);
+    let (samples, dims) = permute(Samples::F32(picked), [n[2], n[1], n[0]], [2, 1, 0])?;
     let len = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
     let spacing = vec.map(|v| voxel_size(len(v)));
     let mut notes = vec![format!("voxel spacing in {}", if angstrom { "Å" } else { "Bohr" })];

@@ -26,6 +26,7 @@
 //! (`check_size`), and text data stop at 64 bytes of text a
 //! value the header declares.
 
+use crate::orient::AxisMap;
 use crate::volume::{Dims, Dtype, LoadedVolume, Samples};
 use anyhow::{Context, Result, bail};
 use std::io::Read;
@@ -877,41 +878,16 @@ pub(crate) fn parse_number(tok: &str) -> Option<f64> {
 }
 
 /// Reorder samples stored with file axes of extents `n` (fastest first),
-/// file axis `i` running along space axis `axis[i]` (0 = x, 1 = y, 2 = z;
-/// a permutation), into x-fastest order. Returns them with `(nx, ny, nz)`.
-pub(crate) fn permute(samples: Samples, n: [usize; 3], axis: [usize; 3]) -> (Samples, Dims) {
-    let mut d = [0usize; 3];
-    for i in 0..3 {
-        d[axis[i]] = n[i];
-    }
-    let dims = Dims(d[0], d[1], d[2]);
-    if axis == [0, 1, 2] {
-        return (samples, dims);
-    }
-    let space_stride = [1, d[0], d[0] * d[1]];
-    let s = [space_stride[axis[0]], space_stride[axis[1]], space_stride[axis[2]]];
-    fn go<T: Copy + Default>(v: &[T], n: [usize; 3], s: [usize; 3]) -> Vec<T> {
-        let mut out = vec![T::default(); v.len()];
-        let mut src = v.iter();
-        for k in 0..n[2] {
-            for j in 0..n[1] {
-                let base = k * s[2] + j * s[1];
-                for i in 0..n[0] {
-                    if let (Some(&x), Some(o)) = (src.next(), out.get_mut(base + i * s[0])) {
-                        *o = x;
-                    }
-                }
-            }
-        }
-        out
-    }
-    let samples = match samples {
-        Samples::U8(v) => Samples::U8(go(&v, n, s)),
-        Samples::U16(v) => Samples::U16(go(&v, n, s)),
-        Samples::I16(v) => Samples::I16(go(&v, n, s)),
-        Samples::F32(v) => Samples::F32(go(&v, n, s)),
-    };
-    (samples, dims)
+/// file axis `i` running along space axis `axis[i]` (0 = x, 1 = y, 2 = z),
+/// into x-fastest order ([`crate::volume::remap`]). Returns them with
+/// `(nx, ny, nz)`.
+///
+/// # Errors
+/// `axis` is not a permutation of 0, 1, 2.
+pub(crate) fn permute(samples: Samples, n: [usize; 3], axis: [usize; 3]) -> Result<(Samples, Dims)> {
+    let map =
+        AxisMap::placing(axis).with_context(|| format!("internal: axes {axis:?} are no permutation"))?;
+    Ok(crate::volume::remap(samples, n, map))
 }
 
 /// A usable voxel size from a file's word: its magnitude when finite and
@@ -1030,7 +1006,7 @@ mod tests {
                 }
             }
         }
-        let (s, d) = permute(Samples::F32(file), [nz, ny, nx], [2, 1, 0]);
+        let (s, d) = permute(Samples::F32(file), [nz, ny, nx], [2, 1, 0]).unwrap();
         assert_eq!(d, Dims(nx, ny, nz));
         let Samples::F32(v) = s else { panic!() };
         for z in 0..nz {
@@ -1041,8 +1017,9 @@ mod tests {
             }
         }
         // Identity leaves it alone.
-        let (s, d) = permute(Samples::U8(vec![1, 2, 3]), [3, 1, 1], [0, 1, 2]);
+        let (s, d) = permute(Samples::U8(vec![1, 2, 3]), [3, 1, 1], [0, 1, 2]).unwrap();
         assert_eq!((s, d), (Samples::U8(vec![1, 2, 3]), Dims(3, 1, 1)));
+        assert!(permute(Samples::U8(vec![1]), [1, 1, 1], [0, 0, 1]).is_err());
     }
 
     #[test]
