@@ -26,7 +26,7 @@
 //! (`check_size`), and text data stop at 64 bytes of text a
 //! value the header declares.
 
-use crate::orient::AxisMap;
+use crate::orient::{AxisMap, Directions, reduce};
 use crate::volume::{Dims, Dtype, LoadedVolume, Samples};
 use anyhow::{Context, Result, bail};
 use std::io::Read;
@@ -106,8 +106,34 @@ impl Format {
 /// Default of [`Options::max_bytes`]: 2 GiB.
 pub const DEFAULT_MAX_BYTES: usize = 2 << 30;
 
-/// Which volume to take from a file that holds several, and how large a
-/// volume may be.
+/// How a volume's axes are laid out when it is loaded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum Orientation {
+    /// As the file's header says the volume lies in space ([`oriented`]):
+    /// a NIfTI file's sform, else its qform; a NRRD file's `space` and
+    /// `space directions`; a cube file's axis vectors. A head is then shown
+    /// upright and facing the viewer ([`crate::orient`]). A file that says
+    /// nothing keeps its index order.
+    #[default]
+    File,
+    /// The file's index axes as they are: x its first (fastest) axis, then
+    /// y, then z (an MRC map's and a cube file's are still put x fastest).
+    Index,
+}
+
+impl std::str::FromStr for Orientation {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "file" => Ok(Orientation::File),
+            "index" => Ok(Orientation::Index),
+            _ => Err(format!("unknown orientation `{s}` (expected file or index)")),
+        }
+    }
+}
+
+/// Which volume to take from a file that holds several, how large a
+/// volume may be, and how to lay out its axes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct Options {
     /// Index from 0 of the volume to load: a NIfTI's time point (the 4th
@@ -120,11 +146,14 @@ pub struct Options {
     /// (`check_size`). Default [`DEFAULT_MAX_BYTES`], 2 GiB; the command
     /// line's `--max-volume-mb` sets it.
     pub max_bytes: usize,
+    /// The file's orientation, or its index order. Default
+    /// [`Orientation::File`]; the command line's `--orientation` sets it.
+    pub orientation: Orientation,
 }
 
 impl Default for Options {
     fn default() -> Self {
-        Options { index: 0, max_bytes: DEFAULT_MAX_BYTES }
+        Options { index: 0, max_bytes: DEFAULT_MAX_BYTES, orientation: Orientation::File }
     }
 }
 
@@ -138,6 +167,46 @@ pub struct Loaded {
     /// Remarks for the user: samples converted with rounding, one of several
     /// volumes taken, a skew ignored, a unit.
     pub notes: Vec<String>,
+}
+
+/// A reader's volume, in the file's index order, laid out as `opts` say:
+/// with [`Orientation::File`] and the file's `directions` of its index
+/// axes (`what` names them for the notes: "sform", "space directions"),
+/// rearranged by [`crate::orient::reduce`] with [`LoadedVolume::reoriented`]
+/// and given the spacing the directions have. Directions that cannot
+/// orient it (not finite, zero, coplanar) leave it in index order, with a
+/// note saying why; so does a flat volume (an extent of 1), which is shown
+/// as a 2D grid, face on.
+pub(crate) fn oriented(mut loaded: Loaded, directions: Option<(Directions, &str)>, opts: &Options) -> Loaded {
+    let Some((d, what)) = directions else { return loaded };
+    if opts.orientation == Orientation::Index {
+        return loaded;
+    }
+    let o = match reduce(&d) {
+        Ok(o) => o,
+        Err(e) => {
+            loaded.notes.push(format!("not oriented by the {what} ({e}): shown in the file's index order"));
+            return loaded;
+        }
+    };
+    let Dims(nx, ny, nz) = loaded.volume.dims;
+    if nx == 1 || ny == 1 || nz == 1 {
+        if !o.map.is_identity() {
+            loaded
+                .notes
+                .push(format!("a flat volume keeps the file's index order (not oriented by its {what})"));
+        }
+        return loaded;
+    }
+    loaded.volume.spacing = o.spacing;
+    if !o.map.is_identity() {
+        loaded.volume = loaded.volume.reoriented(o.map);
+        loaded.notes.push(format!(
+            "oriented by the {what}: {} (--orientation index keeps the file's order)",
+            o.describe()
+        ));
+    }
+    loaded
 }
 
 /// Read `path` if its name or (failing that) its first bytes tell one of
