@@ -109,7 +109,7 @@ pub const DEFAULT_MAX_BYTES: usize = 2 << 30;
 /// How a volume's axes are laid out when it is loaded.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum Orientation {
-    /// As the file's header says the volume lies in space ([`oriented`]):
+    /// As the file's header says the volume lies in space (`oriented`):
     /// a NIfTI file's sform, else its qform; a NRRD file's `space` and
     /// `space directions`; a cube file's axis vectors. A head is then shown
     /// upright and facing the viewer ([`crate::orient`]). A file that says
