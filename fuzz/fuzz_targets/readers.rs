@@ -42,7 +42,7 @@ fuzz_target!(|data: &[u8]| {
     if std::fs::write(&path, file).is_err() {
         return;
     }
-    let opts = Options { index: usize::from(pick / 8 % 3), max_bytes: MAX_BYTES };
+    let opts = Options { index: usize::from(pick / 8 % 3), max_bytes: MAX_BYTES, ..Options::default() };
     if let Ok(loaded) = read_as(&path, format, &opts) {
         let v = &loaded.volume;
         let count = v.dims.count().expect("extents that were read overflow");

@@ -1,6 +1,8 @@
 //! isoscope's host side: the same `isoscope-core` under `std`.
 //!
 //! - [`volume`]: volume sources (raw files, built-in demos) and sample types.
+//! - [`orient`]: a file's orientation reduced to a rearrangement of its
+//!   axes (the default view shows a head upright, facing the viewer).
 //! - [`formats`]: volume file formats (NRRD, NIfTI-1, MRC/CCP4, Gaussian
 //!   cube, VTK legacy), one module each.
 //! - [`contour`]: parallel chicken-wire contouring of a volume into records,
@@ -41,6 +43,7 @@ pub mod fit;
 pub mod formats;
 pub mod info;
 pub mod link;
+pub mod orient;
 pub mod outfile;
 pub mod phosphor;
 #[cfg(not(target_arch = "wasm32"))]

@@ -472,6 +472,12 @@ struct Source {
           default_value_t = isoscope_sim::formats::DEFAULT_MAX_BYTES >> 20,
           value_parser = in_range::<1, 16_777_216, usize>)]
     max_volume_mb: usize,
+    /// file: lay the volume out as its header says it lies in space (a
+    /// NIfTI sform or qform, NRRD space directions, a cube's axis vectors),
+    /// so that a head is upright and faces the viewer; index: the file's
+    /// index axes as they are, x its first.
+    #[arg(long, value_name = "file|index", default_value = "file")]
+    orientation: isoscope_sim::formats::Orientation,
     /// A built-in volume instead of a file: hydrogen:N (the paper's Figure 1,
     /// 3d_xy orbital), gyroid:N, sphere:N or torus:N.
     #[arg(long, value_name = "NAME:N")]
@@ -580,7 +586,11 @@ fn load(source: &Source) -> Result<(LoadedVolume, Option<DemoSpec>)> {
     match (&source.input, source.demo) {
         (Some(path), None) => {
             if source.dims.is_none() && source.dtype.is_none() {
-                let opts = isoscope_sim::formats::Options { index: source.volume_index, max_bytes };
+                let opts = isoscope_sim::formats::Options {
+                    index: source.volume_index,
+                    max_bytes,
+                    orientation: source.orientation,
+                };
                 if let Some((v, notes)) = LoadedVolume::read_known_with(path, &opts)? {
                     for n in &notes {
                         eprintln!("isoscope-sim: note: {}: {n}", path.display());

@@ -1,6 +1,7 @@
 //! Volume sources: raw little-endian files and the built-in demos.
 
 use crate::formats::{self, Input};
+use crate::orient::AxisMap;
 use anyhow::{Context, Result, bail};
 use isoscope_core::demo::Demo;
 use std::path::Path;
@@ -166,6 +167,20 @@ impl LoadedVolume {
         Ok(Self { dims: Dims(n, n, n), samples: Samples::F32(data), spacing: UNIT_SPACING })
     }
 
+    /// The volume with its axes rearranged by `map`: axis `d` of the result
+    /// runs along axis `map.from()[d]` of this one, reversed where
+    /// `map.flip()[d]`; the extents and spacing follow. (A file's
+    /// orientation is applied so, [`crate::formats::Orientation`]: a
+    /// permutation of the samples, so that the board, sent the slices,
+    /// holds the same volume.)
+    #[must_use]
+    pub fn reoriented(self, map: AxisMap) -> Self {
+        let Dims(nx, ny, nz) = self.dims;
+        let (samples, dims) = remap(self.samples, [nx, ny, nz], map);
+        let spacing = map.from().map(|a| self.spacing.get(a).copied().unwrap_or(1.0));
+        Self { dims, samples, spacing }
+    }
+
     /// Decode raw little-endian samples.
     pub fn from_bytes(bytes: &[u8], dims: Dims, dtype: Dtype) -> Result<Self> {
         Self::from_bytes_endian(bytes, dims, dtype, Endian::Little)
@@ -318,5 +333,96 @@ impl LoadedVolume {
     /// [`formats::DEFAULT_MAX_BYTES`]).
     pub fn read_raw(path: &Path, dims: Dims, dtype: Dtype) -> Result<Self> {
         Self::read_raw_endian(path, dims, dtype, Endian::Little, formats::DEFAULT_MAX_BYTES)
+    }
+}
+
+/// Samples of extents `n` (x fastest) rearranged by `map` (axis `d` of the
+/// result runs along axis `map.from()[d]` of `samples`, reversed where
+/// `map.flip()[d]`), with the new extents: the one implementation of
+/// transposing and flipping a volume's axes ([`LoadedVolume::reoriented`],
+/// and the readers of files stored along other axes).
+pub fn remap(samples: Samples, n: [usize; 3], map: AxisMap) -> (Samples, Dims) {
+    let (from, flip) = (map.from(), map.flip());
+    let out = from.map(|a| n.get(a).copied().unwrap_or(1));
+    let dims = Dims(out[0], out[1], out[2]);
+    if map.is_identity() {
+        return (samples, dims);
+    }
+    let stride = [1, n[0], n[0].saturating_mul(n[1])];
+    // offsets[d][t]: where coordinate t along output axis d starts in the input.
+    let offsets: [Vec<usize>; 3] = [0, 1, 2].map(|d| {
+        let (len, s) = (out[d], stride.get(from[d]).copied().unwrap_or(0));
+        (0..len).map(|t| (if flip[d] { len - 1 - t } else { t }) * s).collect()
+    });
+    fn go<T: Copy + Default>(v: &[T], o: &[Vec<usize>; 3]) -> Vec<T> {
+        let mut out = Vec::with_capacity(v.len());
+        for &z in &o[2] {
+            for &y in &o[1] {
+                let base = z + y;
+                out.extend(o[0].iter().map(|&x| v.get(base + x).copied().unwrap_or_default()));
+            }
+        }
+        out
+    }
+    let samples = match samples {
+        Samples::U8(v) => Samples::U8(go(&v, &offsets)),
+        Samples::U16(v) => Samples::U16(go(&v, &offsets)),
+        Samples::I16(v) => Samples::I16(go(&v, &offsets)),
+        Samples::F32(v) => Samples::F32(go(&v, &offsets)),
+    };
+    (samples, dims)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Value 100 x + 10 y + z at (x, y, z) of a 2x3x4 volume, x fastest.
+    fn coded() -> LoadedVolume {
+        let (nx, ny, nz) = (2, 3, 4);
+        let mut v = Vec::new();
+        for z in 0..nz {
+            for y in 0..ny {
+                for x in 0..nx {
+                    v.push((100 * x + 10 * y + z) as f32);
+                }
+            }
+        }
+        LoadedVolume { dims: Dims(nx, ny, nz), samples: Samples::F32(v), spacing: [1.0, 2.0, 3.0] }
+    }
+
+    fn at(v: &LoadedVolume, x: usize, y: usize, z: usize) -> f32 {
+        let Dims(nx, ny, _) = v.dims;
+        let Samples::F32(s) = &v.samples else { panic!() };
+        s[x + nx * (y + ny * z)]
+    }
+
+    #[test]
+    fn reoriented_permutes_and_flips_samples_extents_and_spacing() {
+        // x = -k, y = i, z = j.
+        let map = AxisMap::new([2, 0, 1], [true, false, false]).unwrap();
+        let r = coded().reoriented(map);
+        assert_eq!(r.dims, Dims(4, 2, 3));
+        assert_eq!(r.spacing, [3.0, 1.0, 2.0]);
+        for x in 0..4 {
+            for y in 0..2 {
+                for z in 0..3 {
+                    // Original (i, j, k) = (y, z, 3 - x).
+                    assert_eq!(at(&r, x, y, z), (100 * y + 10 * z + (3 - x)) as f32, "({x},{y},{z})");
+                }
+            }
+        }
+        // Flips alone keep the extents; twice is the identity.
+        let flip = AxisMap::new([0, 1, 2], [true, true, true]).unwrap();
+        let f = coded().reoriented(flip);
+        assert_eq!((f.dims, at(&f, 0, 0, 0), at(&f, 1, 2, 3)), (Dims(2, 3, 4), 123.0, 0.0));
+        assert_eq!(f.reoriented(flip), coded());
+        assert_eq!(coded().reoriented(AxisMap::IDENTITY), coded());
+        // Every type; an empty volume.
+        let u8s =
+            LoadedVolume { dims: Dims(3, 1, 1), samples: Samples::U8(vec![1, 2, 3]), spacing: [1.0; 3] };
+        assert_eq!(u8s.reoriented(flip).samples, Samples::U8(vec![3, 2, 1]));
+        let (s, d) = remap(Samples::I16(vec![]), [0, 2, 2], map);
+        assert_eq!((s, d), (Samples::I16(vec![]), Dims(2, 0, 2)));
     }
 }

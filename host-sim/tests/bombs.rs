@@ -301,7 +301,8 @@ fn max_volume_mb_refuses_and_admits_a_real_file() {
     let path = real_data("brainsmall_gz.nrrd").to_string_lossy().into_owned();
     let over = ["the volume's 128x128x84 int16 samples take 2752512 bytes (2.6 MiB)", "limit of 2 MiB"];
     refused(&[&path, "--max-volume-mb", "2"], &[&[path.as_str()][..], &over[..]].concat());
-    assert!(loaded(&[&path, "--max-volume-mb", "3"]).contains("dims=128x128x84"));
+    // Laid out as its `space: RAS` directions say: superior (k) up.
+    assert!(loaded(&[&path, "--max-volume-mb", "3"]).contains("dims=128x84x128"));
     for cmd in [&["contour", "--format", "none", "--level", "60"][..], &["stats", "--level", "60"]] {
         let mut args = cmd.to_vec();
         args.extend_from_slice(&[&path, "--max-volume-mb", "2"]);

@@ -8,29 +8,38 @@
 //! NRRD with `pynrrd` 1.1, VTK with `meshio` 5.3, and the cube file with a
 //! few lines of numpy (ASE's reader does not take two orbitals): text
 //! split into numbers, reshaped (nx, ny, nz, orbitals) in C order. Points
-//! are (x, y, z), x fastest.
+//! are (x, y, z), x fastest, in the file's index order
+//! ([`Orientation::Index`]; the readers put MRC maps and cube files x
+//! fastest all the same); what the headers' orientation makes of them is
+//! checked by `headers_orient_the_real_files`.
 
-use isoscope_sim::formats::{self, Format, Loaded, Options};
+use isoscope_sim::formats::{self, Format, Loaded, Options, Orientation};
+use isoscope_sim::orient::AxisMap;
 use isoscope_sim::volume::{Dims, LoadedVolume, Samples};
 use isoscope_tests::real_data;
 use std::path::{Path, PathBuf};
 
+/// The file's index order.
+const INDEX: Options =
+    Options { index: 0, max_bytes: formats::DEFAULT_MAX_BYTES, orientation: Orientation::Index };
+
 fn load_index(name: &str, index: usize) -> Loaded {
     let path = real_data(name);
-    formats::read(&path, &Options { index, ..Options::default() })
+    formats::read(&path, &Options { index, ..INDEX })
         .unwrap_or_else(|e| panic!("{name}: {e:#}"))
         .unwrap_or_else(|| panic!("{name}: not a known format"))
 }
 
 fn load(name: &str) -> Loaded {
     let l = load_index(name, 0);
-    // The command line's route, `read_known`, gives the same volume.
-    let known = LoadedVolume::read_known(&real_data(name)).unwrap().expect("a known format");
+    // The command line's route, `read_known_with`, gives the same volume.
+    let (known, _) =
+        LoadedVolume::read_known_with(&real_data(name), &INDEX).unwrap().expect("a known format");
     assert_eq!(known, l.volume, "{name}: read_known differs");
     // The web page's route, the file's bytes, gives it too; a header whose
     // data are in another file is refused there.
     let bytes = std::fs::read(real_data(name)).unwrap();
-    match LoadedVolume::read_known_bytes(name, &bytes, &Options::default()) {
+    match LoadedVolume::read_known_bytes(name, &bytes, &INDEX) {
         Ok(Some((v, notes))) => {
             assert_eq!(v, l.volume, "{name}: read_known_bytes differs");
             assert_eq!(notes, l.notes, "{name}: read_known_bytes' notes differ");
@@ -315,6 +324,53 @@ fn nrrd_gzip_big_endian_from_teem_matches_the_den() {
     assert_eq!(count_above(v, 40.0), 211_180);
 }
 
+/// By default each file is laid out as its header says it lies in space:
+/// the index-order volume rearranged (`x = -i` and so on, as each header
+/// says; nibabel's `aff2axcodes` agrees: anatomical.nii is LAS,
+/// reoriented_anat_moved.nii and standard.nii.gz RAS, example4d.nii.gz LAS
+/// (oblique, 9° about x), KmeansTest_T1UCharRaw.nii.gz LSA by its sform,
+/// brainsmall_gz.nrrd RAS), with a note; files whose headers say nothing
+/// of it, flat ones and those already laid out so are as stored. The
+/// command line's and web page's routes do the same.
+#[test]
+fn headers_orient_the_real_files() {
+    // x = -i (left), y = k (superior), z = j (anterior), from RAS.
+    let ras =
+        (AxisMap::new([0, 2, 1], [true, false, false]), "x = -i (left), y = k (superior), z = j (anterior)");
+    let las = (AxisMap::new([0, 2, 1], [false; 3]), "x = i (left), y = k (superior), z = j (anterior)");
+    for (name, want, by) in [
+        ("anatomical.nii", Some(las), "sform"),
+        ("reoriented_anat_moved.nii", Some(ras), "sform"),
+        ("standard.nii.gz", Some(ras), "sform"),
+        ("example4d.nii.gz", Some(las), "sform"),
+        ("brainsmall_gz.nrrd", Some(ras), "space directions"),
+        ("KmeansTest_T1UCharRaw.nii.gz", None, ""),
+        ("BrainProtonDensitySliceBorder20.nhdr", None, ""),
+        ("N2O_homo+lumo.cube.gz", None, ""),
+        ("1jzv.ccp4", None, ""),
+        ("uniform.vtk", None, ""),
+    ] {
+        let index = load(name);
+        let path = real_data(name);
+        let file = formats::read(&path, &Options::default()).unwrap().unwrap();
+        let (known, notes) = LoadedVolume::read_known_with(&path, &Options::default()).unwrap().unwrap();
+        assert_eq!((&known, &notes), (&file.volume, &file.notes), "{name}: read_known_with differs");
+        match want {
+            None => assert_eq!((&file.volume, &file.notes), (&index.volume, &index.notes), "{name}"),
+            Some((map, text)) => {
+                let moved = index.volume.clone().reoriented(map.unwrap());
+                assert_eq!((file.volume.dims, &file.volume.samples), (moved.dims, &moved.samples), "{name}");
+                for (a, b) in file.volume.spacing.iter().zip(moved.spacing) {
+                    assert!(close(f64::from(*a), f64::from(b), 1e-5), "{name}: {:?}", file.volume.spacing);
+                }
+                let note =
+                    format!("oriented by the {by}: {text} (--orientation index keeps the file's order)");
+                assert_eq!(file.notes.last(), Some(&note), "{name}");
+            }
+        }
+    }
+}
+
 /// pyvista's example: double samples x * y * z on a 10^3 grid, after cell
 /// data with a FIELD array that the reader must skip.
 #[test]
@@ -568,7 +624,7 @@ fn every_format_refuses_a_volume_over_the_limit() {
         ("uniform.vtk", 10 * 10 * 10 * 8),
     ] {
         let path = real_data(name);
-        let opts = |index, max_bytes| Options { index, max_bytes };
+        let opts = |index, max_bytes| Options { index, max_bytes, ..INDEX };
         let e = format!("{:#}", formats::read(&path, &opts(0, bytes - 1)).unwrap_err());
         assert!(
             e.contains(&path.display().to_string())
@@ -580,6 +636,7 @@ fn every_format_refuses_a_volume_over_the_limit() {
         let l = formats::read(&path, &opts(0, bytes)).unwrap_or_else(|e| panic!("{name}: {e:#}")).unwrap();
         assert_eq!(l.volume, load(name).volume, "{name}");
     }
-    let second = formats::read(&real_data("example4d.nii.gz"), &Options { index: 1, max_bytes: 589_824 });
+    let second =
+        formats::read(&real_data("example4d.nii.gz"), &Options { index: 1, max_bytes: 589_824, ..INDEX });
     assert_eq!(second.unwrap().unwrap().volume, load_index("example4d.nii.gz", 1).volume);
 }

@@ -276,7 +276,7 @@ impl Scope {
     }
 
     fn file(&mut self, name: &str, bytes: &[u8]) -> Result<()> {
-        let opts = Options { index: 0, max_bytes: MAX_VOLUME_BYTES };
+        let opts = Options { index: 0, max_bytes: MAX_VOLUME_BYTES, ..Options::default() };
         let Some((vol, notes)) = LoadedVolume::read_known_bytes(name, bytes, &opts)? else {
             bail!(
                 "{name}: not a volume file the page knows by its name or first bytes \

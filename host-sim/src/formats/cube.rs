@@ -9,16 +9,21 @@
 //! orbitals of `NATOMS < 0`, or `NVAL`), [`Options::index`] picks one
 //! (default the first). Spacing: the lengths of the axis vectors, in Bohr
 //! when `N_i > 0` and in Å when negative; a skew between non-orthogonal
-//! axes is not kept (the reader says so).
+//! axes is not kept (the reader says so). Orientation
+//! ([`super::Orientation::File`], the default): the axes are rearranged
+//! (and reversed) to run along the x, y, z their vectors lie nearest
+//! ([`crate::orient`]); vectors that cannot orient it leave the file's
+//! order, with a note.
 //!
 //! The text is read line by line, then value by value, up to the values
 //! the header declares: at most 64 bytes of text a value, so a gigantic or
 //! endless file ends with an error.
 
 use super::{
-    Elem, Format, HEADER_TEXT, Input, Loaded, Options, TEXT_PER_VALUE, TEXT_SLACK, check_size, parse_number,
-    parse_text, permute, voxel_size,
+    Elem, Format, HEADER_TEXT, Input, Loaded, Options, TEXT_PER_VALUE, TEXT_SLACK, check_size, oriented,
+    parse_number, parse_text, permute, voxel_size,
 };
+use crate::orient::{Directions, Space};
 use crate::volume::{LoadedVolume, Samples};
 use anyhow::{Context, Result, anyhow, bail};
 use std::path::Path;
@@ -146,7 +151,7 @@ pub(crate) fn read_from(input: &mut Input<'_>, opts: &Options) -> Result<Loaded>
         bail!("the file holds more values than {what}");
     }
     // File order: the third axis fastest, the first slowest.
-    let (samples, dims) = permute(Samples::F32(picked), [n[2], n[1], n[0]], [2, 1, 0]);
+    let (samples, dims) = permute(Samples::F32(picked), [n[2], n[1], n[0]], [2, 1, 0])?;
     let len = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
     let spacing = vec.map(|v| voxel_size(len(v)));
     let mut notes = vec![format!("voxel spacing in {}", if angstrom { "Å" } else { "Bohr" })];
@@ -164,7 +169,9 @@ pub(crate) fn read_from(input: &mut Input<'_>, opts: &Options) -> Result<Loaded>
         };
         notes.push(format!("the file holds {per_point} {which} (index {})", opts.index));
     }
-    Ok(Loaded { volume: LoadedVolume { dims, samples, spacing }, format: Format::Cube, notes })
+    let loaded = Loaded { volume: LoadedVolume { dims, samples, spacing }, format: Format::Cube, notes };
+    let axes = Directions { space: Space::Xyz, columns: vec };
+    Ok(oriented(loaded, Some((axes, "axis vectors")), opts))
 }
 
 #[cfg(test)]
@@ -256,6 +263,33 @@ mod tests {
         assert_eq!(l.volume.spacing[1], (0.125f64).sqrt() as f32);
         assert_eq!(l.notes[0], "voxel spacing in Å");
         assert!(l.notes[1].contains("not orthogonal"));
+    }
+
+    /// Axis vectors along other axes: the first axis along -z, the third
+    /// along +x: x = k, y = j, z = -i; `Index` keeps the file's order.
+    #[test]
+    fn axis_vectors_orient_the_grid() {
+        let text = cube([2, 3, 4], &[], value)
+            .replace(" 0.5 0.0 0.0\n", " 0.0 0.0 -0.5\n")
+            .replace(" 0.0 0.0 2.0\n", " 2.0 0.0 0.0\n");
+        let l = parse(text.as_bytes(), &Options::default()).unwrap();
+        assert_eq!((l.volume.dims, l.volume.spacing), (Dims(4, 3, 2), [2.0, 0.25, 0.5]));
+        let Samples::F32(v) = &l.volume.samples else { panic!() };
+        for z in 0..2 {
+            for y in 0..3 {
+                for x in 0..4 {
+                    assert_eq!(v[x + 4 * (y + 3 * z)], value(1 - z, y, x, 0) as f32, "({x},{y},{z})");
+                }
+            }
+        }
+        assert!(l.notes[1].contains("oriented by the axis vectors: x = k (+x), y = j (+y), z = -i (+z)"));
+        let index = Options { orientation: super::super::Orientation::Index, ..Options::default() };
+        assert_eq!(parse(text.as_bytes(), &index).unwrap().volume.dims, Dims(2, 3, 4));
+        // Zero vectors: the file's order, and why.
+        let text = cube([2, 3, 4], &[], value).replace(" 0.5 0.0 0.0\n", " 0.0 0.0 0.0\n");
+        let l = parse(text.as_bytes(), &Options::default()).unwrap();
+        assert_eq!(l.volume.dims, Dims(2, 3, 4));
+        assert!(l.notes.iter().any(|n| n.contains("not oriented by the axis vectors")), "{:?}", l.notes);
     }
 
     #[test]

@@ -26,6 +26,7 @@
 //! (`check_size`), and text data stop at 64 bytes of text a
 //! value the header declares.
 
+use crate::orient::{AxisMap, Directions, reduce};
 use crate::volume::{Dims, Dtype, LoadedVolume, Samples};
 use anyhow::{Context, Result, bail};
 use std::io::Read;
@@ -105,8 +106,34 @@ impl Format {
 /// Default of [`Options::max_bytes`]: 2 GiB.
 pub const DEFAULT_MAX_BYTES: usize = 2 << 30;
 
-/// Which volume to take from a file that holds several, and how large a
-/// volume may be.
+/// How a volume's axes are laid out when it is loaded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum Orientation {
+    /// As the file's header says the volume lies in space (`oriented`):
+    /// a NIfTI file's sform, else its qform; a NRRD file's `space` and
+    /// `space directions`; a cube file's axis vectors. A head is then shown
+    /// upright and facing the viewer ([`crate::orient`]). A file that says
+    /// nothing keeps its index order.
+    #[default]
+    File,
+    /// The file's index axes as they are: x its first (fastest) axis, then
+    /// y, then z (an MRC map's and a cube file's are still put x fastest).
+    Index,
+}
+
+impl std::str::FromStr for Orientation {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "file" => Ok(Orientation::File),
+            "index" => Ok(Orientation::Index),
+            _ => Err(format!("unknown orientation `{s}` (expected file or index)")),
+        }
+    }
+}
+
+/// Which volume to take from a file that holds several, how large a
+/// volume may be, and how to lay out its axes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct Options {
     /// Index from 0 of the volume to load: a NIfTI's time point (the 4th
@@ -119,11 +146,14 @@ pub struct Options {
     /// (`check_size`). Default [`DEFAULT_MAX_BYTES`], 2 GiB; the command
     /// line's `--max-volume-mb` sets it.
     pub max_bytes: usize,
+    /// The file's orientation, or its index order. Default
+    /// [`Orientation::File`]; the command line's `--orientation` sets it.
+    pub orientation: Orientation,
 }
 
 impl Default for Options {
     fn default() -> Self {
-        Options { index: 0, max_bytes: DEFAULT_MAX_BYTES }
+        Options { index: 0, max_bytes: DEFAULT_MAX_BYTES, orientation: Orientation::File }
     }
 }
 
@@ -137,6 +167,46 @@ pub struct Loaded {
     /// Remarks for the user: samples converted with rounding, one of several
     /// volumes taken, a skew ignored, a unit.
     pub notes: Vec<String>,
+}
+
+/// A reader's volume, in the file's index order, laid out as `opts` say:
+/// with [`Orientation::File`] and the file's `directions` of its index
+/// axes (`what` names them for the notes: "sform", "space directions"),
+/// rearranged by [`crate::orient::reduce`] with [`LoadedVolume::reoriented`]
+/// and given the spacing the directions have. Directions that cannot
+/// orient it (not finite, zero, coplanar) leave it in index order, with a
+/// note saying why; so does a flat volume (an extent of 1), which is shown
+/// as a 2D grid, face on.
+pub(crate) fn oriented(mut loaded: Loaded, directions: Option<(Directions, &str)>, opts: &Options) -> Loaded {
+    let Some((d, what)) = directions else { return loaded };
+    if opts.orientation == Orientation::Index {
+        return loaded;
+    }
+    let o = match reduce(&d) {
+        Ok(o) => o,
+        Err(e) => {
+            loaded.notes.push(format!("not oriented by the {what} ({e}): shown in the file's index order"));
+            return loaded;
+        }
+    };
+    let Dims(nx, ny, nz) = loaded.volume.dims;
+    if nx == 1 || ny == 1 || nz == 1 {
+        if !o.map.is_identity() {
+            loaded
+                .notes
+                .push(format!("a flat volume keeps the file's index order (not oriented by its {what})"));
+        }
+        return loaded;
+    }
+    loaded.volume.spacing = o.spacing;
+    if !o.map.is_identity() {
+        loaded.volume = loaded.volume.reoriented(o.map);
+        loaded.notes.push(format!(
+            "oriented by the {what}: {} (--orientation index keeps the file's order)",
+            o.describe()
+        ));
+    }
+    loaded
 }
 
 /// Read `path` if its name or (failing that) its first bytes tell one of
@@ -877,41 +947,16 @@ pub(crate) fn parse_number(tok: &str) -> Option<f64> {
 }
 
 /// Reorder samples stored with file axes of extents `n` (fastest first),
-/// file axis `i` running along space axis `axis[i]` (0 = x, 1 = y, 2 = z;
-/// a permutation), into x-fastest order. Returns them with `(nx, ny, nz)`.
-pub(crate) fn permute(samples: Samples, n: [usize; 3], axis: [usize; 3]) -> (Samples, Dims) {
-    let mut d = [0usize; 3];
-    for i in 0..3 {
-        d[axis[i]] = n[i];
-    }
-    let dims = Dims(d[0], d[1], d[2]);
-    if axis == [0, 1, 2] {
-        return (samples, dims);
-    }
-    let space_stride = [1, d[0], d[0] * d[1]];
-    let s = [space_stride[axis[0]], space_stride[axis[1]], space_stride[axis[2]]];
-    fn go<T: Copy + Default>(v: &[T], n: [usize; 3], s: [usize; 3]) -> Vec<T> {
-        let mut out = vec![T::default(); v.len()];
-        let mut src = v.iter();
-        for k in 0..n[2] {
-            for j in 0..n[1] {
-                let base = k * s[2] + j * s[1];
-                for i in 0..n[0] {
-                    if let (Some(&x), Some(o)) = (src.next(), out.get_mut(base + i * s[0])) {
-                        *o = x;
-                    }
-                }
-            }
-        }
-        out
-    }
-    let samples = match samples {
-        Samples::U8(v) => Samples::U8(go(&v, n, s)),
-        Samples::U16(v) => Samples::U16(go(&v, n, s)),
-        Samples::I16(v) => Samples::I16(go(&v, n, s)),
-        Samples::F32(v) => Samples::F32(go(&v, n, s)),
-    };
-    (samples, dims)
+/// file axis `i` running along space axis `axis[i]` (0 = x, 1 = y, 2 = z),
+/// into x-fastest order ([`crate::volume::remap`]). Returns them with
+/// `(nx, ny, nz)`.
+///
+/// # Errors
+/// `axis` is not a permutation of 0, 1, 2.
+pub(crate) fn permute(samples: Samples, n: [usize; 3], axis: [usize; 3]) -> Result<(Samples, Dims)> {
+    let map =
+        AxisMap::placing(axis).with_context(|| format!("internal: axes {axis:?} are no permutation"))?;
+    Ok(crate::volume::remap(samples, n, map))
 }
 
 /// A usable voxel size from a file's word: its magnitude when finite and
@@ -1030,7 +1075,7 @@ mod tests {
                 }
             }
         }
-        let (s, d) = permute(Samples::F32(file), [nz, ny, nx], [2, 1, 0]);
+        let (s, d) = permute(Samples::F32(file), [nz, ny, nx], [2, 1, 0]).unwrap();
         assert_eq!(d, Dims(nx, ny, nz));
         let Samples::F32(v) = s else { panic!() };
         for z in 0..nz {
@@ -1041,8 +1086,9 @@ mod tests {
             }
         }
         // Identity leaves it alone.
-        let (s, d) = permute(Samples::U8(vec![1, 2, 3]), [3, 1, 1], [0, 1, 2]);
+        let (s, d) = permute(Samples::U8(vec![1, 2, 3]), [3, 1, 1], [0, 1, 2]).unwrap();
         assert_eq!((s, d), (Samples::U8(vec![1, 2, 3]), Dims(3, 1, 1)));
+        assert!(permute(Samples::U8(vec![1]), [1, 1, 1], [0, 0, 1]).is_err());
     }
 
     #[test]

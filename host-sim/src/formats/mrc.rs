@@ -141,7 +141,7 @@ pub(crate) fn read_from(input: &mut Input<'_>, opts: &Options) -> Result<Loaded>
             elem.name()
         )
     })?;
-    let (samples, dims) = permute(decode(body, elem, e), n, axis);
+    let (samples, dims) = permute(decode(body, elem, e), n, axis)?;
     let m = [w(7), w(8), w(9)];
     let spacing = [0, 1, 2].map(|i| {
         let cell = f64::from(real(bytes, 10 + i, e));

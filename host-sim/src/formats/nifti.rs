@@ -10,11 +10,19 @@
 //! `f32` samples. Spacing: `|pixdim[1..=3]|`. Dims: `dim[1..=3]`, missing
 //! ones 1; a file with more dimensions (`dim[4..]`, time and so on) holds
 //! several volumes, and [`Options::index`] picks one (default the first).
-//! The orientation (qform, sform) is not applied: x is the file's first axis.
+//!
+//! Orientation ([`super::Orientation::File`], the default): the sform if
+//! `sform_code > 0`, else the qform (quaternion, `pixdim`, `qfac`) if
+//! `qform_code > 0`, else none; the volume is then rearranged so that a head
+//! is upright and faces the viewer ([`crate::orient`]), and the spacing is
+//! the length of each axis's direction. With [`super::Orientation::Index`],
+//! x is the file's first axis.
 
 use super::{
-    Data, Elem, Endian, Format, Input, Loaded, Options, byte_len, check_size, decode, to_f32, voxel_size,
+    Data, Elem, Endian, Format, Input, Loaded, Options, byte_len, check_size, decode, oriented, to_f32,
+    voxel_size,
 };
+use crate::orient::{Directions, Space, qform_directions};
 use crate::volume::{Dims, LoadedVolume, Samples};
 use anyhow::{Context, Result, anyhow, bail};
 use nifti::{NiftiError, NiftiHeader, NiftiType};
@@ -224,11 +232,29 @@ fn volume(h: &NiftiHeader, input: &mut Input<'_>, min: usize, opts: &Options) ->
         notes.push(format!("scaled by scl_slope {slope} and scl_inter {inter} into f32"));
     }
     let spacing = [1, 2, 3].map(|i| if i <= n { voxel_size(f64::from(h.pixdim[i])) } else { 1.0 });
-    Ok(Loaded {
+    let loaded = Loaded {
         volume: LoadedVolume { dims: Dims(nx, ny, nz), samples, spacing },
         format: Format::Nifti,
         notes,
-    })
+    };
+    Ok(oriented(loaded, directions(h), opts))
+}
+
+/// The directions of the index axes in RAS+ space: the sform's if its code
+/// is positive, else the qform's if its code is, else none (the index axes;
+/// nifti1.h's method 1).
+fn directions(h: &NiftiHeader) -> Option<(Directions, &'static str)> {
+    if h.sform_code > 0 {
+        let rows = [h.srow_x, h.srow_y, h.srow_z].map(|r| r.map(f64::from));
+        let columns = [0, 1, 2].map(|i| [rows[0][i], rows[1][i], rows[2][i]]);
+        Some((Directions { space: Space::Ras, columns }, "sform"))
+    } else if h.qform_code > 0 {
+        let q = [h.quatern_b, h.quatern_c, h.quatern_d].map(f64::from);
+        let pixdim = [h.pixdim[0], h.pixdim[1], h.pixdim[2], h.pixdim[3]].map(f64::from);
+        Some((qform_directions(q, pixdim), "qform"))
+    } else {
+        None
+    }
 }
 
 /// Volume `index` of `one` bytes from `data`; then, if `whole`, the rest
@@ -357,23 +383,32 @@ pub(crate) mod tests {
     fn four_dimensions_over_the_limit_read_only_the_volume_taken() {
         let v = le16(&[1, 2, 3, 4, 5, 6]);
         let f = file(&[2, 1, 1, 3], 4, 16, [1.0; 3], (0.0, 0.0), b"n+1\0", false, &v[..9]);
-        let small = |index| Options { index, max_bytes: 4 };
+        let small = |index| Options { index, max_bytes: 4, ..Options::default() };
         assert_eq!(parse(&f, &small(0)).unwrap().volume.samples, Samples::I16(vec![1, 2]));
         assert_eq!(parse(&f, &small(1)).unwrap().volume.samples, Samples::I16(vec![3, 4]));
         let e = format!("{:#}", parse(&f, &small(2)).unwrap_err());
         assert!(e.contains("the data stop after 9 of 12 bytes (truncated?)"), "{e}");
         let e = format!("{:#}", parse(&f, &Options::default()).unwrap_err());
         assert!(e.contains("the data stop after 9 of 12 bytes (truncated?)"), "{e}");
-        let e = format!("{:#}", parse(&f, &Options { index: 0, max_bytes: 3 }).unwrap_err());
+        let e = format!(
+            "{:#}",
+            parse(&f, &Options { index: 0, max_bytes: 3, ..Options::default() }).unwrap_err()
+        );
         assert!(e.contains("2x1x1 int16 samples take 4 bytes, more than the limit of 3 bytes"), "{e}");
         // Scaled to f32: the loaded size counts.
         let f = file(&[2, 1, 1], 4, 16, [1.0; 3], (2.0, 0.0), b"n+1\0", false, &v[..4]);
-        let e = format!("{:#}", parse(&f, &Options { index: 0, max_bytes: 7 }).unwrap_err());
+        let e = format!(
+            "{:#}",
+            parse(&f, &Options { index: 0, max_bytes: 7, ..Options::default() }).unwrap_err()
+        );
         assert!(e.contains("2x1x1 float32 samples take 8 bytes"), "{e}");
         // Extensions larger than the limit before the data are not read through.
         let mut f = file(&[2, 1, 1], 4, 16, [1.0; 3], (0.0, 0.0), b"n+1\0", false, &v[..4]);
         f[108..112].copy_from_slice(&1e6f32.to_le_bytes());
-        let e = format!("{:#}", parse(&f, &Options { index: 0, max_bytes: 1000 }).unwrap_err());
+        let e = format!(
+            "{:#}",
+            parse(&f, &Options { index: 0, max_bytes: 1000, ..Options::default() }).unwrap_err()
+        );
         assert!(e.contains("vox_offset 1000000 puts the data more than the limit of 1000 bytes"), "{e}");
     }
 
@@ -473,5 +508,140 @@ pub(crate) mod tests {
         let e = format!("{:#}", read(&dir.join("b.hdr"), &Options::default()).unwrap_err());
         assert!(e.contains("truncated") && e.contains("b.img"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Set a little-endian header's sform (rows `srow`, code `code`).
+    fn set_sform(f: &mut [u8], code: i16, srow: [[f32; 4]; 3]) {
+        f[254..256].copy_from_slice(&code.to_le_bytes());
+        for (r, row) in srow.iter().enumerate() {
+            for (c, v) in row.iter().enumerate() {
+                let at = 280 + 16 * r + 4 * c;
+                f[at..at + 4].copy_from_slice(&v.to_le_bytes());
+            }
+        }
+    }
+
+    /// Set a little-endian header's qform (quaternion b, c, d; code 1).
+    fn set_qform(f: &mut [u8], q: [f32; 3]) {
+        f[252..254].copy_from_slice(&1i16.to_le_bytes());
+        for (i, v) in q.iter().enumerate() {
+            f[256 + 4 * i..260 + 4 * i].copy_from_slice(&v.to_le_bytes());
+        }
+    }
+
+    /// The reference volume in RAS order, 3x4x5 (i right, j anterior, k
+    /// superior), voxels 1 x 2 x 3 mm: value i + 3 (j + 4 k) at (i, j, k).
+    fn ras_value(i: usize, j: usize, k: usize) -> u8 {
+        (i + 3 * (j + 4 * k)) as u8
+    }
+
+    /// The reference stored along other axes: i' posterior (reversed j),
+    /// j' superior (k), k' left (reversed i): 4x5x3.
+    fn permuted_data() -> Vec<u8> {
+        let mut v = Vec::new();
+        for c in 0..3 {
+            for b in 0..5 {
+                for a in 0..4 {
+                    v.push(ras_value(2 - c, 3 - a, b));
+                }
+            }
+        }
+        v
+    }
+
+    /// Shown as a face: x left (reversed i), y superior (k), z anterior (j).
+    fn shown_as_a_face() -> LoadedVolume {
+        let mut v = Vec::new();
+        for z in 0..4 {
+            for y in 0..5 {
+                for x in 0..3 {
+                    v.push(ras_value(2 - x, z, y));
+                }
+            }
+        }
+        LoadedVolume { dims: Dims(3, 5, 4), samples: Samples::U8(v), spacing: [1.0, 3.0, 2.0] }
+    }
+
+    /// The same head stored in RAS order with an sform, along permuted and
+    /// reversed axes with an sform, and so with a qform only: each loads as
+    /// the same volume, upright and facing the viewer; `Index` keeps the
+    /// file's order.
+    #[test]
+    fn permuted_and_flipped_forms_load_as_the_ras_reference() {
+        let ras: Vec<u8> = (0..60).collect();
+        let mut reference = file(&[3, 4, 5], 2, 8, [1.0, 2.0, 3.0], (0.0, 0.0), b"n+1\0", false, &ras);
+        set_sform(&mut reference, 2, [[1.0, 0.0, 0.0, -1.0], [0.0, 2.0, 0.0, -3.0], [0.0, 0.0, 3.0, -6.0]]);
+        let mut by_sform =
+            file(&[4, 5, 3], 2, 8, [2.0, 3.0, 1.0], (0.0, 0.0), b"n+1\0", false, &permuted_data());
+        let mut by_qform = by_sform.clone();
+        set_sform(&mut by_sform, 1, [[0.0, 0.0, -1.0, 1.0], [-2.0, 0.0, 0.0, 3.0], [0.0, 3.0, 0.0, -6.0]]);
+        // The rotation taking i' to -y, j' to z, k' to -x: a = 1/2, (b, c, d) = (1/2, -1/2, -1/2).
+        set_qform(&mut by_qform, [0.5, -0.5, -0.5]);
+        let want = shown_as_a_face();
+        for (name, f, what) in
+            [("reference", &reference, "sform"), ("sform", &by_sform, "sform"), ("qform", &by_qform, "qform")]
+        {
+            let l = parse(f, &Options::default()).unwrap();
+            assert_eq!(l.volume, want, "{name}");
+            assert!(
+                l.notes.iter().any(|n| n.starts_with(&format!("oriented by the {what}: x = "))),
+                "{name}: {:?}",
+                l.notes
+            );
+        }
+        let index = Options { orientation: super::super::Orientation::Index, ..Options::default() };
+        let l = parse(&by_sform, &index).unwrap();
+        assert_eq!((l.volume.dims, l.volume.spacing), (Dims(4, 5, 3), [2.0, 3.0, 1.0]));
+        assert_eq!(l.volume.samples, Samples::U8(permuted_data()));
+        assert!(l.notes.is_empty(), "{:?}", l.notes);
+        // Without either form: the index axes.
+        let plain = file(&[4, 5, 3], 2, 8, [2.0, 3.0, 1.0], (0.0, 0.0), b"n+1\0", false, &permuted_data());
+        assert_eq!(parse(&plain, &Options::default()).unwrap().volume, l.volume);
+        // An sform wins over a qform.
+        let mut both = by_qform.clone();
+        set_sform(&mut both, 1, [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]]);
+        assert_eq!(parse(&both, &Options::default()).unwrap().volume.dims, Dims(4, 3, 5));
+    }
+
+    /// NaN, zero, huge or coplanar forms leave the file's order, with a
+    /// note saying why, and never panic; so does a flat volume.
+    #[test]
+    fn hostile_forms_keep_the_index_order() {
+        let data: Vec<u8> = (0..60).collect();
+        let good = file(&[3, 4, 5], 2, 8, [1.0, 2.0, 3.0], (0.0, 0.0), b"n+1\0", false, &data);
+        let nan = f32::NAN;
+        for (srow, why) in [
+            (
+                [[nan, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]],
+                "index axis i is not finite",
+            ),
+            ([[0.0; 4], [0.0; 4], [0.0; 4]], "index axis i is zero"),
+            ([[1.0, 0.0, 0.0, 0.0], [0.0, 3e38, 0.0, 0.0], [0.0, 3e38, 1.0, 0.0]], "index axis j is 4.24"),
+            ([[1.0, 1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]], "coplanar"),
+            ([[f32::INFINITY; 4], [0.0; 4], [0.0; 4]], "not finite"),
+        ] {
+            let mut f = good.clone();
+            set_sform(&mut f, 1, srow);
+            let l = parse(&f, &Options::default()).unwrap();
+            assert_eq!((l.volume.dims, l.volume.spacing), (Dims(3, 4, 5), [1.0, 2.0, 3.0]), "{why}");
+            assert_eq!(l.volume.samples, Samples::U8(data.clone()));
+            let note = l.notes.join("; ");
+            assert!(note.contains("not oriented by the sform") && note.contains(why), "{why}: {note}");
+            assert!(note.contains("shown in the file's index order"), "{note}");
+        }
+        let mut f = good.clone();
+        set_qform(&mut f, [nan, 0.0, 0.0]);
+        let note = parse(&f, &Options::default()).unwrap().notes.join("; ");
+        assert!(note.contains("not oriented by the qform"), "{note}");
+        // A flat volume (one slice) keeps its order, face on.
+        let mut flat = file(&[3, 4, 1], 2, 8, [1.0; 3], (0.0, 0.0), b"n+1\0", false, &data[..12]);
+        set_sform(&mut flat, 1, [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]]);
+        let l = parse(&flat, &Options::default()).unwrap();
+        assert_eq!((l.volume.dims, l.volume.samples), (Dims(3, 4, 1), Samples::U8(data[..12].to_vec())));
+        assert!(
+            l.notes.iter().any(|n| n.contains("a flat volume keeps the file's index order")),
+            "{:?}",
+            l.notes
+        );
     }
 }

@@ -14,14 +14,22 @@
 //! `bzip2`, `hex` and the multi-file `data file` forms are refused with a
 //! clear error.
 //!
+//! Orientation ([`super::Orientation::File`], the default): with `space
+//! directions` in an anatomical `space` (`RAS`, `LAS`, `LPS`) the volume is
+//! rearranged so that a head is upright and faces the viewer, in a plain
+//! one (`scanner-xyz`, `3D-right-handed`, `3D-left-handed`, or only `space
+//! dimension: 3`) so that its x, y and z are the display's
+//! ([`crate::orient`]); the spacing is then the length of each direction.
+//!
 //! The header is read, then exactly the bytes of data it declares (raw, or
 //! gzip inflated as it is read), and nothing may follow; ASCII data are read
 //! value by value, at most 64 bytes of text a value.
 
 use super::{
-    Elem, Endian, Format, Input, Loaded, Options, TEXT_PER_VALUE, TEXT_SLACK, check_size, decode, parse_text,
-    single_volume, text, voxel_size,
+    Elem, Endian, Format, Input, Loaded, Options, TEXT_PER_VALUE, TEXT_SLACK, check_size, decode, oriented,
+    parse_text, single_volume, text, voxel_size,
 };
+use crate::orient::{Directions, Space};
 use crate::volume::{Dims, LoadedVolume};
 use anyhow::{Context, Result, bail};
 use std::collections::HashMap;
@@ -178,6 +186,7 @@ pub(crate) fn read_from(mut input: Input<'_>, dir: Option<&Path>, opts: &Options
     let n = [0, 1, 2].map(|i| sizes.get(i).copied().unwrap_or(1));
 
     let mut spacing = [1.0f32; 3];
+    let mut axes = None;
     if let Some(d) = get("space directions") {
         let dirs = directions(d)?;
         if dirs.len() != dim {
@@ -188,6 +197,7 @@ pub(crate) fn read_from(mut input: Input<'_>, dir: Option<&Path>, opts: &Options
                 *s = voxel_size(v.iter().map(|x| x * x).sum::<f64>().sqrt());
             }
         }
+        axes = space(get("space"), get("space dimension")).and_then(|sp| orientation(sp, &dirs));
     } else if let Some(sp) = get("spacings") {
         for (s, v) in spacing.iter_mut().zip(sp.split_ascii_whitespace()) {
             *s = voxel_size(v.parse().unwrap_or(f64::NAN));
@@ -292,11 +302,42 @@ pub(crate) fn read_from(mut input: Input<'_>, dir: Option<&Path>, opts: &Options
             s
         }
     };
-    Ok(Loaded {
+    let loaded = Loaded {
         volume: LoadedVolume { dims: Dims(n[0], n[1], n[2]), samples, spacing },
         format: Format::Nrrd,
         notes: elem.note().into_iter().collect(),
+    };
+    Ok(oriented(loaded, axes.map(|a| (a, "space directions")), opts))
+}
+
+/// A NRRD space of three dimensions: anatomical (`RAS`, `LAS`, `LPS`, or
+/// spelt out, in any case), with the signs that take its coordinates to
+/// RAS+; or plain (`scanner-xyz`, `3D-right-handed`, `3D-left-handed`, or
+/// no `space` but `space dimension: 3`). `None` for any other (the spaces
+/// with time have four dimensions).
+fn space(space: Option<&str>, dimension: Option<&str>) -> Option<(Space, [f64; 3])> {
+    let Some(name) = space else {
+        return (dimension.map(str::trim) == Some("3")).then_some((Space::Xyz, [1.0; 3]));
+    };
+    Some(match name.trim().to_ascii_lowercase().as_str() {
+        "ras" | "right-anterior-superior" => (Space::Ras, [1.0, 1.0, 1.0]),
+        "las" | "left-anterior-superior" => (Space::Ras, [-1.0, 1.0, 1.0]),
+        "lps" | "left-posterior-superior" => (Space::Ras, [-1.0, -1.0, 1.0]),
+        "scanner-xyz" | "3d-right-handed" | "3d-left-handed" => (Space::Xyz, [1.0; 3]),
+        _ => return None,
     })
+}
+
+/// The directions of the first three axes in `space`, when each is a
+/// vector of three components (a `none`, another count, or fewer than
+/// three axes: no orientation).
+fn orientation((space, sign): (Space, [f64; 3]), dirs: &[Option<Vec<f64>>]) -> Option<Directions> {
+    let mut columns = [[0f64; 3]; 3];
+    for (col, d) in columns.iter_mut().zip(dirs.get(..3)?) {
+        let v: [f64; 3] = d.as_deref()?.try_into().ok()?;
+        *col = [v[0] * sign[0], v[1] * sign[1], v[2] * sign[2]];
+    }
+    Some(Directions { space, columns })
 }
 
 /// How the data are stored.
@@ -450,11 +491,15 @@ mod tests {
         let e = err(&f);
         assert!(e.contains("text runs on for more than") && e.contains("more than 2 values take"), "{e}");
         let f = nrrd("type: uchar\ndimension: 1\nsizes: 2\nencoding: raw\nbyte skip: 100\n", &[0; 102]);
-        let e = format!("{:#}", parse(&f, None, &Options { index: 0, max_bytes: 10 }).unwrap_err());
+        let e = format!(
+            "{:#}",
+            parse(&f, None, &Options { index: 0, max_bytes: 10, ..Options::default() }).unwrap_err()
+        );
         assert!(e.contains("`byte skip: 100` is more than the limit of 10 bytes"), "{e}");
         let e = format!(
             "{:#}",
-            parse(&nrrd(U8, &[0; 24]), None, &Options { index: 0, max_bytes: 23 }).unwrap_err()
+            parse(&nrrd(U8, &[0; 24]), None, &Options { index: 0, max_bytes: 23, ..Options::default() })
+                .unwrap_err()
         );
         assert!(e.contains("2x3x4 uint8 samples take 24 bytes, more than the limit of 23 bytes"), "{e}");
         // A header without end.
@@ -579,5 +624,67 @@ mod tests {
             "{e}"
         );
         assert!(err(&nrrd("type: double\ndimension: 3\nsizes: 10000000000 10000000000 10000000000\nendian: big\nencoding: raw\n", &z)).contains("overflow"));
+    }
+
+    /// A 2x3x4 volume in RAS order (i right, j anterior, k superior) given
+    /// in LPS, RAS and in a plain space along permuted axes: the anatomical
+    /// ones load upright and facing the viewer (x = -i, y = k, z = j), the
+    /// plain one with its x, y, z along the display's; `Index` and spaces
+    /// the reader does not know keep the file's order.
+    #[test]
+    fn space_directions_orient_the_volume() {
+        let data: Vec<u8> = (0..24).collect();
+        let head = |space: &str, dirs: &str| nrrd(&format!("{U8}{space}space directions: {dirs}\n"), &data);
+        let mut face = Vec::new();
+        for z in 0..3 {
+            for y in 0..4 {
+                for x in 0..2 {
+                    face.push((1 - x) + 2 * (z + 3 * y) as u8);
+                }
+            }
+        }
+        let face = LoadedVolume { dims: Dims(2, 4, 3), samples: Samples::U8(face), spacing: [0.5, 3.0, 2.0] };
+        for f in [
+            head("space: RAS\n", "(0.5,0,0) (0,2,0) (0,0,3)"),
+            head("space: left-posterior-superior\n", "(-0.5,0,0) (0,-2,0) (0,0,3)"),
+            head("space: LAS\n", "(-0.5,0,0) (0,2,0) (0,0,3)"),
+        ] {
+            let l = load(&f);
+            assert_eq!(l.volume, face);
+            assert_eq!(
+                l.notes,
+                ["oriented by the space directions: x = -i (left), y = k (superior), z = j (anterior) \
+                  (--orientation index keeps the file's order)"]
+            );
+        }
+        // Plain space: i along y, j along z, k along x.
+        let l = load(&head("space: scanner-xyz\n", "(0,1,0) (0,0,1) (1,0,0)"));
+        assert_eq!((l.volume.dims, l.volume.spacing), (Dims(4, 2, 3), [1.0; 3]));
+        let Samples::U8(v) = &l.volume.samples else { panic!() };
+        // Display (x, y, z) is file (y, z, x).
+        assert_eq!((v[0], v[1], v[4 * 2]), (0, 6, 2), "{v:?}");
+        assert!(l.notes[0].contains("x = k (+x), y = i (+y), z = j (+z)"), "{:?}", l.notes);
+        let l = load(&head("space dimension: 3\n", "(0,1,0) (0,0,1) (1,0,0)"));
+        assert_eq!(l.volume.dims, Dims(4, 2, 3));
+        // Index order, an unknown space, time, or a missing vector: as stored.
+        let index = Options { orientation: super::super::Orientation::Index, ..Options::default() };
+        let f = head("space: RAS\n", "(0.5,0,0) (0,2,0) (0,0,3)");
+        assert_eq!(parse(&f, None, &index).unwrap().volume.dims, Dims(2, 3, 4));
+        for f in [
+            head("space: RAST\n", "(1,0,0,0) (0,1,0,0) (0,0,1,0)"),
+            head("space: nowhere\n", "(0,1,0) (0,0,1) (1,0,0)"),
+            head("", "(0,1,0) (0,0,1) (1,0,0)"),
+            head("space dimension: 2\n", "(0,1) (1,0) (1,1)"),
+        ] {
+            let l = load(&f);
+            assert_eq!(l.volume.dims, Dims(2, 3, 4));
+            assert!(l.notes.is_empty(), "{:?}", l.notes);
+        }
+        // Coplanar directions: the file's order, and why.
+        let l = load(&head("space: LPS\n", "(1,0,0) (0,1,0) (1,1,0)"));
+        assert_eq!(l.volume.dims, Dims(2, 3, 4));
+        assert!(
+            l.notes[0].contains("not oriented by the space directions") && l.notes[0].contains("coplanar")
+        );
     }
 }

@@ -595,9 +595,12 @@ ignored 2 1 int
                 && e.contains("more than 12 values and keyword lines take"),
             "{e}"
         );
-        let e = format!("{:#}", parse(ASCII.as_bytes(), &Options { index: 0, max_bytes: 23 }).unwrap_err());
+        let e = format!(
+            "{:#}",
+            parse(ASCII.as_bytes(), &Options { index: 0, max_bytes: 23, ..Options::default() }).unwrap_err()
+        );
         assert!(e.contains("3x2x2 int16 samples take 24 bytes, more than the limit of 23 bytes"), "{e}");
-        assert!(parse(ASCII.as_bytes(), &Options { index: 0, max_bytes: 24 }).is_ok());
+        assert!(parse(ASCII.as_bytes(), &Options { index: 0, max_bytes: 24, ..Options::default() }).is_ok());
         // Binary data right after SCALARS, without a LOOKUP_TABLE line.
         let f = binary("unsigned_char", b"LOO", 3);
         let no_table = String::from_utf8_lossy(&f).replace("LOOKUP_TABLE default\n", "");
