@@ -157,11 +157,7 @@ impl Limits {
     /// same capabilities, else only the protocol's.
     pub fn of_info(info: &BoardInfo) -> Self {
         let slice_bytes = usize::try_from(info.max_slice_samples).unwrap_or(usize::MAX);
-        let known = Board::ALL.into_iter().find(|b| {
-            b.capacity.slice_bytes == slice_bytes
-                && u32::try_from(b.capacity.points).is_ok_and(|p| p == info.display_points)
-        });
-        match known {
+        match known_board(info) {
             Some(b) => {
                 Self::of_capacity(&b.capacity, format!("the board (an {} by its capabilities)", b.name))
             }
@@ -189,6 +185,16 @@ impl Limits {
     }
 }
 
+/// The board of the core's ([`Board::ALL`]) whose memory a connected
+/// board reported: the same slice bytes and display points.
+pub fn known_board(info: &BoardInfo) -> Option<Board> {
+    let slice_bytes = usize::try_from(info.max_slice_samples).ok()?;
+    Board::ALL.into_iter().find(|b| {
+        b.capacity.slice_bytes == slice_bytes
+            && u32::try_from(b.capacity.points).is_ok_and(|p| p == info.display_points)
+    })
+}
+
 const AXES: [&str; 3] = ["x", "y", "z"];
 
 /// The extents after block sizes `f` (whole blocks only).
@@ -209,6 +215,76 @@ pub fn auto_factor(dims: Dims, size: usize, limits: &Limits) -> Option<usize> {
     // Past min(nx, ny) / 2 a slice has fewer than 2x2 samples.
     let most = dims.0.min(dims.1) / 2;
     (1..=most).find(|&f| limits.fits(downsampled_dims(dims, uniform(dims, f).0), size))
+}
+
+/// What a board draws of a volume: the slice stride it thinned the
+/// surface to (every `every`-th slice of each plane) and whether it still
+/// had to drop pieces at the coarsest stride.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Drawn {
+    /// The stride drawn (at least the one asked for).
+    pub every: usize,
+    /// Pieces of the surface were dropped.
+    pub dropped: bool,
+}
+
+/// A board's choice of uniform downsample ([`finest_on_board`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Choice {
+    /// The uniform block size.
+    pub factor: usize,
+    /// What the board draws at that factor.
+    pub drawn: Drawn,
+}
+
+impl Choice {
+    /// How far apart the slices drawn lie, in voxels of the volume before
+    /// the downsample.
+    pub fn spacing(&self) -> usize {
+        self.factor.saturating_mul(self.drawn.every)
+    }
+}
+
+/// Fewest samples along x or y a downsample leaves ([`finest_on_board`]):
+/// a coarser grid is hardly a picture of the volume.
+pub const MIN_FIT_EXTENT: usize = 12;
+
+/// Of the uniform downsamples of a volume of `dims` from `first` on, the
+/// one a board draws most of: a board whose surface memory is short thins
+/// the slices it draws (every 2nd, 4th, ... of each plane) and, at the
+/// coarsest, drops pieces, while a smaller volume has fewer and shorter
+/// contours, so a coarser grid may show more of the volume. Ranked by:
+/// no pieces dropped, then the drawn slices closest together in the
+/// volume's own voxels ([`Choice::spacing`]), then the smaller factor (the
+/// finer grid). `draw(f)` puts the volume downsampled by `f` on the
+/// board; factors are tried upwards while one could still rank better
+/// (`f` times the stride `asked` is less than the best spacing) and the
+/// grid keeps [`MIN_FIT_EXTENT`] samples along x and y.
+///
+/// # Errors
+/// `draw`'s first error.
+pub fn finest_on_board(
+    dims: Dims,
+    first: usize,
+    asked: usize,
+    mut draw: impl FnMut(usize) -> Result<Drawn>,
+) -> Result<Choice> {
+    let first = first.max(1);
+    let rank = |c: &Choice| (c.drawn.dropped, c.spacing(), c.factor);
+    let mut best = Choice { factor: first, drawn: draw(first)? };
+    let mut f = first;
+    loop {
+        f += 1;
+        let d = downsampled_dims(dims, uniform(dims, f).0);
+        let could = !best.drawn.dropped && f.saturating_mul(asked.max(1)) >= best.spacing();
+        if could || d.0.min(d.1) < MIN_FIT_EXTENT || f > dims.0.min(dims.1) {
+            return Ok(best);
+        }
+        let c = Choice { factor: f, drawn: draw(f)? };
+        if rank(&c) < rank(&best) {
+            best = c;
+        }
+    }
 }
 
 /// The sample type of `samples`.
@@ -417,6 +493,30 @@ fn dims_text(d: Dims) -> String {
 /// [`downsample`]), a volume no uniform downsample fits to the board, or
 /// a crop or downsample after which it still does not fit.
 pub fn fit(vol: LoadedVolume, opts: &FitOptions, limits: Option<&Limits>) -> Result<Fitted> {
+    fit_drawing(vol, opts, limits.map(|l| (l, None)))
+}
+
+/// A board's picture of a volume: the stride asked for, and the board
+/// ([`Drawn`]) for a volume put on it.
+pub type Draw<'d> = (usize, &'d mut dyn FnMut(&LoadedVolume) -> Result<Drawn>);
+
+/// [`fit`] for a board whose picture `draw` gives: with neither a crop
+/// nor a downsample given, the uniform downsample the board draws most of
+/// ([`finest_on_board`]: from the smallest that fits its slice memory on,
+/// the one whose drawn slices lie closest together in the volume), said in
+/// a note when it is not the smallest.
+///
+/// # Errors
+/// As [`fit`], and `draw`'s.
+pub fn fit_to_board(vol: LoadedVolume, opts: &FitOptions, limits: &Limits, draw: Draw<'_>) -> Result<Fitted> {
+    fit_drawing(vol, opts, Some((limits, Some(draw))))
+}
+
+fn fit_drawing(
+    vol: LoadedVolume,
+    opts: &FitOptions,
+    board: Option<(&Limits, Option<Draw<'_>>)>,
+) -> Result<Fitted> {
     let mut notes = Vec::new();
     let mut vol = vol;
     let original = vol.dims;
@@ -424,11 +524,11 @@ pub fn fit(vol: LoadedVolume, opts: &FitOptions, limits: Option<&Limits>) -> Res
         vol = crop(&vol, c)?;
         notes.push(format!("--crop {c}: {} of {}", dims_text(vol.dims), dims_text(original)));
     }
-    let Some(limits) = limits else {
+    let Some((limits, draw)) = board else {
         if let Some(f) = opts.downsample {
             let before = vol.dims;
             vol = downsample(&vol, f)?;
-            notes.push(downsample_note(before, f, &vol, None));
+            notes.push(downsample_note(before, f, &vol, None, false));
         }
         return Ok(Fitted { volume: vol, notes });
     };
@@ -442,9 +542,10 @@ pub fn fit(vol: LoadedVolume, opts: &FitOptions, limits: Option<&Limits>) -> Res
     }
     let ty = dtype_of(&vol.samples);
     let before = vol.dims;
+    let fits = limits.fits(before, ty.size());
     let chosen = match opts.downsample {
         Some(f) => Some((f, false)),
-        None if opts.crop.is_none() && !limits.fits(before, ty.size()) => {
+        None if opts.crop.is_none() && !fits => {
             let Some(n) = auto_factor(before, ty.size(), limits) else {
                 bail!(
                     "{}; no uniform downsample of a {} {ty:?} volume fits (--crop X0:X1,Y0:Y1,Z0:Z1 a part of it)",
@@ -456,18 +557,50 @@ pub fn fit(vol: LoadedVolume, opts: &FitOptions, limits: Option<&Limits>) -> Res
         }
         None => None,
     };
+    // The board's picture at the smallest factor that fits, and at the
+    // coarser ones while they may draw more.
+    let mut thinned = None;
+    let chosen = match (draw, chosen) {
+        (Some((asked, draw)), None | Some((_, true))) if opts.crop.is_none() => {
+            let first = chosen.map_or(1, |(f, _)| f.0[0]);
+            let at = |f: usize| -> Result<Drawn> {
+                if f == 1 { draw(&vol) } else { draw(&downsample(&vol, uniform(before, f))?) }
+            };
+            let mut at = at;
+            let best = finest_on_board(before, first, asked, &mut at)?;
+            if best.factor != first {
+                thinned = Some((first, at(first)?, best));
+            }
+            (best.factor > 1).then(|| (uniform(before, best.factor), true))
+        }
+        (_, chosen) => chosen,
+    };
     if let Some((f, auto)) = chosen {
         vol = downsample(&vol, f)?;
-        let why = auto.then(|| {
-            format!(
+        let why = match thinned {
+            _ if !auto => None,
+            Some((first, at_first, best)) => Some(format!(
+                "{} draws {} of a {} volume (slices {} voxels apart{}), and {} once downsampled by {} \
+                 ({} voxels apart): ",
+                limits.holder,
+                crate::scene::stride(u16::try_from(at_first.every).unwrap_or(u16::MAX)),
+                dims_text(downsampled_dims(before, uniform(before, first).0)),
+                first.saturating_mul(at_first.every),
+                if at_first.dropped { ", some pieces dropped" } else { "" },
+                crate::scene::stride(u16::try_from(best.drawn.every).unwrap_or(u16::MAX)),
+                best.factor,
+                best.spacing(),
+            )),
+            None if fits => None,
+            None => Some(format!(
                 "{}, and a {}x{} slice of {ty:?} is {} bytes: ",
                 limits.describe(),
                 before.0,
                 before.1,
                 before.0.saturating_mul(before.1).saturating_mul(ty.size())
-            )
-        });
-        notes.push(downsample_note(before, f, &vol, why));
+            )),
+        };
+        notes.push(downsample_note(before, f, &vol, why, thinned.is_some()));
     }
     if !limits.fits(vol.dims, ty.size()) {
         let hint = match auto_factor(vol.dims, ty.size(), limits) {
@@ -484,7 +617,13 @@ pub fn fit(vol: LoadedVolume, opts: &FitOptions, limits: Option<&Limits>) -> Res
 }
 
 /// The note for a downsample of a `before` volume by `f` into `after`.
-fn downsample_note(before: Dims, f: Factors, after: &LoadedVolume, why: Option<String>) -> String {
+fn downsample_note(
+    before: Dims,
+    f: Factors,
+    after: &LoadedVolume,
+    why: Option<String>,
+    drawn: bool,
+) -> String {
     let ty = dtype_of(&after.samples);
     let n = [before.0, before.1, before.2];
     let left: Vec<String> = (0..3)
@@ -494,9 +633,14 @@ fn downsample_note(before: Dims, f: Factors, after: &LoadedVolume, why: Option<S
     let rounded = if ty == Dtype::F32 { "" } else { ", rounded" };
     let mut s = match &why {
         Some(why) => format!(
-            "{why}downsampling by {} (the smallest factor that fits; --downsample or --crop to choose): \
+            "{why}downsampling by {} ({}; --downsample or --crop to choose): \
              the mean of each {} block{rounded}, {} {ty:?}",
             f.0[0],
+            if drawn {
+                "the factor whose drawn slices lie closest together"
+            } else {
+                "the smallest factor that fits"
+            },
             f.block(),
             dims_text(after.dims)
         ),

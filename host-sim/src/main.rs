@@ -376,6 +376,30 @@ fn fit_volume(
     Ok(fitted.volume)
 }
 
+/// Fit `vol` as `args` say to a board of `limits`, whose picture `cfg` makes (the
+/// stride `every` gives for a volume's dims): with neither --crop nor
+/// --downsample, at the downsample the board draws most of
+/// ([`isoscope_sim::fit::fit_to_board`]); the notes on standard error.
+fn fit_board_volume(
+    vol: LoadedVolume,
+    args: &FitArgs,
+    limits: &isoscope_sim::fit::Limits,
+    cfg: &SceneConfig,
+    every: impl Fn(isoscope_sim::volume::Dims) -> usize,
+) -> Result<LoadedVolume> {
+    use isoscope_sim::fit::Drawn;
+    let mut draw = |v: &LoadedVolume| -> Result<Drawn> {
+        let cfg = SceneConfig { every: every(v.dims), ..cfg.clone() };
+        let loaded = scene::build(&WireVolume::from_loaded(v)?, &cfg)?.loaded;
+        Ok(Drawn { every: usize::from(loaded.every), dropped: loaded.dropped > 0 || loaded.cut > 0 })
+    };
+    let fitted = isoscope_sim::fit::fit_to_board(vol, &args.options(), limits, (1, &mut draw))?;
+    for n in &fitted.notes {
+        eprintln!("isoscope-sim: note: {n}");
+    }
+    Ok(fitted.volume)
+}
+
 #[derive(Args, Debug, Clone, Copy)]
 struct ViewArgs {
     /// Rotation about the vertical screen axis, degrees.
@@ -854,14 +878,22 @@ fn prepare(
     let (vol, demo) = load(&input.source)?;
     let levels = levels_for(&input.levels, demo, Some(&vol))?;
     let planes = planes(&input.axes)?;
-    let limits = board.board.map(|b| isoscope_sim::fit::Limits::of_board(&b));
-    let vol = fit_volume(vol, &input.fit, limits.as_ref())?;
-    let every = match v.every {
-        Some(0) => bail!("--every must be at least 1"),
+    if v.every == Some(0) {
+        bail!("--every must be at least 1");
+    }
+    let every_for = |dims| match v.every {
         Some(n) => n,
-        None if auto_every => scene::auto_every(vol.dims),
+        None if auto_every => scene::auto_every(dims),
         None => 1,
     };
+    let vol = match board.board {
+        Some(b) => {
+            let cfg = SceneConfig { planes: planes.clone(), ..SceneConfig::board(b, levels.clone()) };
+            fit_board_volume(vol, &input.fit, &isoscope_sim::fit::Limits::of_board(&b), &cfg, every_for)?
+        }
+        None => fit_volume(vol, &input.fit, None)?,
+    };
+    let every = every_for(vol.dims);
     if every > 1 && v.every.is_none() {
         let stride = scene::stride(u16::try_from(every).unwrap_or(u16::MAX));
         eprintln!("isoscope-sim: note: drawing {stride} (--every to choose)");
@@ -983,8 +1015,10 @@ fn send(args: &SendArgs) -> Result<()> {
         preview.planes = planes(&args.input.axes)?;
         preview.every = usize::from(args.every);
         preview.send()?;
+        let every = preview.every;
+        let limits = Limits::of_board(&board);
         let wire =
-            WireVolume::from_loaded(&fit_volume(vol, &args.input.fit, Some(&Limits::of_board(&board)))?)?;
+            WireVolume::from_loaded(&fit_board_volume(vol, &args.input.fit, &limits, &preview, |_| every)?)?;
         // What that board will show: the same engine with its memory.
         if let Some(v) = view {
             let [yaw, pitch, roll] = v.angles;
@@ -1035,7 +1069,19 @@ fn send(args: &SendArgs) -> Result<()> {
         Some(w) => w,
         None => {
             let vol = vol.context("the volume was fitted already")?;
-            WireVolume::from_loaded(&fit_volume(vol, &args.input.fit, Some(&Limits::of_info(link.board())))?)?
+            // A board the core knows by its capabilities is fitted as
+            // --board fits it, to what it draws; any other to its slices.
+            let fitted = match isoscope_sim::fit::known_board(link.board()) {
+                Some(board) => {
+                    let mut cfg = SceneConfig::board(board, cfg.levels.clone());
+                    cfg.planes = planes(&args.input.axes)?;
+                    cfg.every = usize::from(args.every);
+                    let limits = Limits::of_info(link.board());
+                    fit_board_volume(vol, &args.input.fit, &limits, &cfg, |_| usize::from(args.every))?
+                }
+                None => fit_volume(vol, &args.input.fit, Some(&Limits::of_info(link.board())))?,
+            };
+            WireVolume::from_loaded(&fitted)?
         }
     };
     let chunks_per_slice = wire.slice_bytes().div_ceil(cfg.chunk.max(1));

@@ -751,7 +751,7 @@ fn big_endian_raw_files() {
 /// before `send` opens the port.
 #[test]
 fn board_preset_says_what_the_board_cannot_hold() {
-    let out = run(&["stats", "--demo", "gyroid:48", "--board", "f407"]);
+    let out = run(&["stats", "--demo", "gyroid:48", "--board", "f407", "--downsample", "1"]);
     assert!(out.status.success(), "{}", text(&out.stderr));
     let err = text(&out.stderr);
     assert!(err.contains("note: the f407 board holds less than this surface"), "{err}");
@@ -761,12 +761,26 @@ fn board_preset_says_what_the_board_cannot_hold() {
     );
     let out = run(&["stats", "--demo", "gyroid:48"]);
     assert!(!text(&out.stderr).contains("note: the"), "{}", text(&out.stderr));
+    // Without --downsample, the board's picture of a coarser grid, whose
+    // drawn slices lie closer together in the volume.
+    let out = run(&["stats", "--demo", "gyroid:48", "--board", "f407"]);
+    let err = text(&out.stderr);
+    assert!(
+        err.contains(
+            "note: the f407 board draws every 32nd slice of a 48x48x48 volume (slices 32 voxels apart), \
+             and every 2nd slice once downsampled by 4 (8 voxels apart): downsampling by 4 (the factor \
+             whose drawn slices lie closest together; --downsample or --crop to choose)"
+        ),
+        "{err}"
+    );
+    assert!(text(&out.stdout).contains("every=2\n"), "{}", text(&out.stdout));
+    // Too wide for a slice: from the smallest factor that fits on.
     let out = run(&["stats", "--demo", "gyroid:100", "--board", "f407"]);
     let err = text(&out.stderr);
     assert!(out.status.success(), "{err}");
     assert!(
-        err.contains("a 100x100 slice of F32 is 40000 bytes: downsampling by 2")
-            && err.contains("2x2x2 block, 50x50x50 F32"),
+        err.contains("the f407 board draws every 32nd slice of a 50x50x50 volume (slices 64 voxels apart)")
+            && err.contains("7x7x7 block, 14x14x14 F32"),
         "{err}"
     );
     for cmd in ["render", "send"] {

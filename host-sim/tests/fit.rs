@@ -141,7 +141,9 @@ fn samples_narrow_only_when_every_value_fits() {
 }
 
 /// `send` of an MNI152-sized volume to a virtual f407 board: downsampled
-/// by 2 with a note, sent, and the board draws it.
+/// with a note (by 2 to fit its slices, by 3 for its picture: every 8th
+/// slice asked, every 16th drawn at 2, every 8th at 3), sent, and the
+/// board draws it.
 #[test]
 fn send_fits_an_mni152_sized_volume_to_the_virtual_board() {
     let dir = std::env::temp_dir().join(format!("isoscope-fit-{}", std::process::id()));
@@ -177,7 +179,11 @@ fn send_fits_an_mni152_sized_volume_to_the_virtual_board() {
     assert!(out.status.success(), "send failed: {err}");
     assert!(status.success());
     assert!(err.contains("isoscope-sim: note: the board (an f407 by its capabilities)"), "{err}");
-    assert!(err.contains("downsampling by 2") && err.contains("sent 98x116x94 U8"), "{err}");
+    assert!(
+        err.contains("draws every 16th slice of a 98x116x94 volume (slices 32 voxels apart), and every 8th slice once downsampled by 3 (24 voxels apart)")
+            && err.contains("sent 65x77x63 U8"),
+        "{err}"
+    );
     let text = String::from_utf8_lossy(&out.stdout);
     let points: u64 = text
         .lines()
@@ -203,4 +209,60 @@ fn a_real_slice_too_wide_for_the_board_is_fitted() {
     let text = String::from_utf8_lossy(&out.stdout);
     let points: u64 = text.lines().find_map(|l| l.strip_prefix("points=")?.parse().ok()).unwrap();
     assert!(points > 100, "{text}");
+}
+
+/// A board that draws a volume of `n` samples a side every `stride(n)`-th
+/// slice, dropping pieces above `drops` samples a side.
+fn search(
+    n: usize,
+    asked: usize,
+    stride: impl Fn(usize) -> usize,
+    drops: usize,
+) -> (fit::Choice, Vec<usize>) {
+    let dims = Dims(n, n, n);
+    let mut tried = Vec::new();
+    let c = fit::finest_on_board(dims, 1, asked, |f| {
+        tried.push(f);
+        let side = n / f;
+        Ok(fit::Drawn { every: stride(side).max(asked), dropped: side > drops })
+    })
+    .unwrap();
+    (c, tried)
+}
+
+#[test]
+fn the_board_fit_draws_the_slices_closest_together_in_the_volume() {
+    // The MRI head's figures (`stats --board f407 --downsample F`,
+    // 128x128x84 u8 at level 40): every 64th slice whole, 16th at 2, 4th
+    // at 3, 2nd at 4, every slice at 6 (and, here, at 5).
+    let mri = |side: usize| match side {
+        128.. => 64,
+        64.. => 16,
+        42.. => 4,
+        32.. => 2,
+        _ => 1,
+    };
+    let (c, tried) = search(128, 1, mri, usize::MAX);
+    assert_eq!((c.factor, c.drawn.every, c.spacing()), (5, 1, 5));
+    // 6 and on could only draw slices 6 or more apart: not tried.
+    assert_eq!(tried, [1, 2, 3, 4, 5]);
+
+    // A volume the board draws whole stays as it is.
+    let (c, tried) = search(64, 1, |_| 1, usize::MAX);
+    assert_eq!((c.factor, tried), (1, vec![1]));
+    // Asked for every 4th slice, drawn so: nothing gained downsampling.
+    let (c, tried) = search(64, 4, |_| 1, usize::MAX);
+    assert_eq!((c.factor, c.spacing(), tried), (1, 4, vec![1]));
+
+    // Dropping pieces ranks below any picture that does not, however far
+    // apart its slices.
+    let (c, _) = search(128, 1, |side| if side > 20 { 2 } else { 8 }, 20);
+    assert_eq!((c.factor, c.drawn.dropped), (7, false));
+    // A tie in spacing: the finer grid.
+    let (c, tried) = search(96, 1, |side| if side > 48 { 4 } else { 2 }, usize::MAX);
+    assert_eq!((c.factor, c.spacing(), tried), (1, 4, vec![1, 2, 3]));
+    // Never coarser than MIN_FIT_EXTENT samples a side, even dropping.
+    let (c, tried) = search(40, 1, |_| 64, 0);
+    assert!(tried.iter().all(|&f| 40 / f >= fit::MIN_FIT_EXTENT || f == 1), "{tried:?}");
+    assert_eq!(c.factor, 1);
 }
