@@ -35,11 +35,12 @@ use std::process::ExitCode;
   isoscope-sim contour --demo torus:32 --format svg -o torus.svg
   isoscope-sim contour data.raw --dims 256x256x128 --dtype i16 --level 300 -o ct.csv
 
-Volumes: NIfTI-1 (.nii, .hdr), NRRD (.nrrd, .nhdr), MRC/CCP4 (.mrc, .map, .ccp4), Gaussian cube
-(.cube), VTK legacy (.vtk), VolPack .den (any may end in .gz), a raw file (--dims NXxNYxNZ --dtype
-u8|u16|i16|f32, x fastest), or --demo hydrogen:N | gyroid:N | sphere:N | torus:N. Levels: --level L
-(repeatable); a demo has a default. A volume too large for a board (send, --board) is downsampled
-to fit, with a note; --downsample N and --crop X0:X1,Y0:Y1,Z0:Z1 choose.
+Volumes: NIfTI-1 (.nii, .hdr), NRRD (.nrrd, .nhdr), MRC/CCP4 (.mrc, .map, .ccp4, .mrcs, .rec),
+Gaussian cube (.cube, .cub), VTK legacy (.vtk), VolPack (.den) (any may end in .gz), a raw file
+(--dims NXxNYxNZ --dtype u8|u16|i16|f32, x fastest), or --demo hydrogen:N | gyroid:N | sphere:N |
+torus:N. Levels: --level L (repeatable); a demo has a default. A volume too large for a board
+(send, --board) is downsampled to fit, with a note; --downsample N and --crop X0:X1,Y0:Y1,Z0:Z1
+choose.
 'isoscope-sim COMMAND --help' lists every flag."
 )]
 struct Cli {
@@ -445,9 +446,9 @@ struct StatsArgs {
 #[derive(Args, Debug, Clone)]
 struct Source {
     /// Volume file: NIfTI-1 (.nii, .hdr), NRRD (.nrrd, .nhdr), MRC/CCP4
-    /// (.mrc, .map, .ccp4), Gaussian cube (.cube), VTK legacy (.vtk),
-    /// VolPack .den (any may end in .gz), or raw samples, x fastest (a raw
-    /// file needs --dims and --dtype).
+    /// (.mrc, .map, .ccp4, .mrcs, .rec), Gaussian cube (.cube, .cub), VTK
+    /// legacy (.vtk), VolPack (.den) (any may end in .gz), or raw samples,
+    /// x fastest (a raw file needs --dims and --dtype).
     #[arg(conflicts_with = "demo")]
     input: Option<PathBuf>,
     /// Volume extents NXxNYxNZ (a 2D grid has NZ = 1).
@@ -587,6 +588,10 @@ fn load(source: &Source) -> Result<(LoadedVolume, Option<DemoSpec>)> {
                     }
                     return Ok((v, None));
                 }
+                // A file that cannot be opened to look at says why; one
+                // that can names no format that loads.
+                std::fs::File::open(path).with_context(|| format!("cannot read {}", path.display()))?;
+                return Err(isoscope_sim::volume::LoadError::UnknownFormat(path.clone()).into());
             }
             let dims = source.dims.context("a raw volume file needs --dims NXxNYxNZ (and --dtype)")?;
             let dtype = source.dtype.context("a raw volume file needs --dtype u8|u16|i16|f32")?;

@@ -157,6 +157,45 @@ pub struct LoadedVolume {
 /// Voxel spacing when a format gives none.
 pub const UNIT_SPACING: [f32; 3] = [1.0, 1.0, 1.0];
 
+/// The volume files that load by their name or first bytes, with their
+/// name endings: every [`formats::Format`], then VolPack `.den`.
+pub fn known_formats() -> String {
+    let mut names: Vec<String> = formats::Format::ALL
+        .iter()
+        .map(|f| {
+            let ext: Vec<String> = f.extensions().iter().map(|e| format!(".{e}")).collect();
+            format!("{} ({})", f.name(), ext.join(", "))
+        })
+        .collect();
+    names.push("VolPack (.den)".into());
+    names.join(", ")
+}
+
+/// Why a volume file was not loaded.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum LoadError {
+    /// Neither the file's name nor its first bytes tell a format that
+    /// loads, and no `--dims` and `--dtype` say how to read it raw.
+    UnknownFormat(std::path::PathBuf),
+}
+
+impl std::fmt::Display for LoadError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            LoadError::UnknownFormat(path) => write!(
+                f,
+                "{}: neither its name nor its first bytes tell a volume format; volumes load from {} \
+                 files, any of them gzipped (.gz), and from raw samples with --dims NXxNYxNZ and \
+                 --dtype u8|u16|i16|f32",
+                path.display(),
+                known_formats()
+            ),
+        }
+    }
+}
+
+impl std::error::Error for LoadError {}
+
 impl LoadedVolume {
     /// Compute a built-in demo.
     pub fn demo(spec: DemoSpec) -> Result<Self> {

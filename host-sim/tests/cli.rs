@@ -1102,3 +1102,62 @@ fn the_manual_page_is_one_roff_page_with_every_subcommand() {
     assert!(out.stdout.is_empty(), "{}", text(&out.stdout));
     assert_eq!(std::fs::read_to_string(&file).unwrap(), page);
 }
+
+// --- Telling the truth (issue 19) -------------------------------------------
+
+/// Standard error, its lines without the `isoscope-sim: ` prefix.
+fn said(out: &Output) -> String {
+    text(&out.stderr)
+}
+
+/// The subcommands that take a volume file (`[INPUT]`).
+const INPUT_COMMANDS: [&str; 6] = ["contour", "stats", "info", "wav", "render", "send"];
+
+/// A file that no format's name or first bytes tell is refused by naming
+/// the formats that load (not by asking for a raw file's --dims), and a
+/// file that is not there by saying so; the help names every format and
+/// every name ending that loads.
+#[test]
+fn an_unknown_format_is_refused_by_naming_the_formats_that_load() {
+    use isoscope_sim::formats::Format;
+    let dir = TempDir::new("unknown-format");
+    let odd = dir.file("notes.xyz", b"hello, this is not a volume\n");
+    for cmd in INPUT_COMMANDS {
+        let mut args = vec![cmd, odd.as_str()];
+        if cmd == "send" {
+            args.extend(["--port", "tcp:127.0.0.1:1"]);
+        }
+        let out = run(&args);
+        let err = said(&out);
+        assert_eq!(out.status.code(), Some(1), "{cmd}: {err}");
+        assert!(
+            err.starts_with(&format!("isoscope-sim: error: {odd}: neither its name nor")),
+            "{cmd}: {err}"
+        );
+        for f in Format::ALL {
+            assert!(err.contains(f.name()), "{cmd}: {} is not named: {err}", f.name());
+            for e in f.extensions() {
+                assert!(err.contains(&format!(".{e}")), "{cmd}: .{e} is not named: {err}");
+            }
+        }
+        assert!(err.contains(".den") && err.contains(".gz"), "{cmd}: {err}");
+        assert!(err.contains("--dims NXxNYxNZ") && err.contains("--dtype"), "{cmd}: {err}");
+        assert_eq!(err.lines().count(), 1, "{cmd}: {err}");
+    }
+    let gone = path_str(&dir.0.join("gone.xyz"));
+    let err = said(&run(&["info", &gone]));
+    assert!(err.starts_with(&format!("isoscope-sim: error: cannot read {gone}: ")), "{err}");
+    // The help, wrapped or not, names every format and ending.
+    let flat = |args: &[&str]| text(&run(args).stdout).split_whitespace().collect::<Vec<_>>().join(" ");
+    let mut helps = vec![("isoscope-sim --help".to_owned(), flat(&["--help"]))];
+    helps.extend(INPUT_COMMANDS.map(|c| (format!("{c} --help"), flat(&[c, "--help"]))));
+    for (what, help) in &helps {
+        for f in Format::ALL {
+            assert!(help.contains(f.name()), "{what} does not name {}", f.name());
+            for e in f.extensions() {
+                assert!(help.contains(&format!(".{e}")), "{what} does not name .{e}");
+            }
+        }
+        assert!(help.contains("VolPack (.den)") && help.contains(".gz"), "{what}: {help}");
+    }
+}
