@@ -297,9 +297,9 @@ impl LoadedVolume {
     /// `opts` (which also bound the volume's size), and with the reader's
     /// remarks for the user (conversions, units, which volume was taken).
     pub fn read_known_with(path: &Path, opts: &formats::Options) -> Result<Option<(Self, Vec<String>)>> {
-        match path.extension().and_then(|e| e.to_str()) {
+        match formats::extension(path).as_deref() {
             Some("den") => {
-                let v = Input::open_plain(path)
+                let v = Input::open(path)
                     .and_then(|mut input| Self::read_den(&mut input, opts.max_bytes))
                     .with_context(|| format!("cannot load {}", path.display()))?;
                 Ok(Some((v, Vec::new())))
@@ -319,9 +319,13 @@ impl LoadedVolume {
         bytes: &[u8],
         opts: &formats::Options,
     ) -> Result<Option<(Self, Vec<String>)>> {
-        if Path::new(name).extension().and_then(|e| e.to_str()) == Some("den") {
-            let v = Self::read_den(&mut Input::from_slice(bytes), opts.max_bytes)
-                .with_context(|| format!("cannot load {name}"))?;
+        if formats::extension(Path::new(name)).as_deref() == Some("den") {
+            let mut input = Input::from_slice(bytes);
+            if formats::is_gzip(bytes) {
+                input = input.gunzip_rest();
+            }
+            let v =
+                Self::read_den(&mut input, opts.max_bytes).with_context(|| format!("cannot load {name}"))?;
             return Ok(Some((v, Vec::new())));
         }
         Ok(formats::read_bytes(name, bytes, opts)?.map(|l| (l.volume, l.notes)))

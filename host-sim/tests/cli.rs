@@ -1161,3 +1161,31 @@ fn an_unknown_format_is_refused_by_naming_the_formats_that_load() {
         assert!(help.contains("VolPack (.den)") && help.contains(".gz"), "{what}: {help}");
     }
 }
+
+/// A VolPack `.den` file loads gzipped (`.den.gz`, any case), as the help
+/// says every format does: the same volume as the plain file.
+#[test]
+fn a_gzipped_den_file_loads_like_the_plain_one() {
+    use std::io::Write as _;
+    // The 62-byte header, big-endian: version 1, then map_len (shorts 25
+    // to 27) 3x2x2 and the sample count; then the samples.
+    let mut den = vec![0u8; 62];
+    den[1] = 1;
+    for (i, n) in [3u16, 2, 2].into_iter().enumerate() {
+        den[50 + 2 * i..52 + 2 * i].copy_from_slice(&n.to_be_bytes());
+    }
+    den[58..62].copy_from_slice(&12i32.to_be_bytes());
+    den.extend([0u8, 10, 200, 30, 40, 250, 60, 70, 80, 90, 100, 110]);
+    let mut z = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    z.write_all(&den).unwrap();
+    let gz = z.finish().unwrap();
+    let dir = TempDir::new("den-gz");
+    let plain = run(&["info", &dir.file("head.den", &den)]);
+    assert!(plain.status.success(), "{}", said(&plain));
+    assert!(text(&plain.stdout).starts_with("dims=3x2x2\ndtype=u8\n"), "{}", text(&plain.stdout));
+    for name in ["head.den.gz", "HEAD.DEN.GZ"] {
+        let out = run(&["info", &dir.file(name, &gz)]);
+        assert!(out.status.success(), "{name}: {}", said(&out));
+        assert_eq!(text(&out.stdout), text(&plain.stdout), "{name}");
+    }
+}
