@@ -39,15 +39,21 @@ pub fn write_whole<T>(path: &Path, write: impl FnOnce(&mut Out<'_>) -> Result<T>
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
-    // Created as `File::create` would (0666 less the umask), not 0600.
-    let mut builder = tempfile::Builder::new();
-    builder.prefix(".isoscope-").suffix(".part");
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        builder.permissions(std::fs::Permissions::from_mode(0o666));
-    }
-    let mut tmp = builder.tempfile_in(dir).with_context(|| format!("cannot create {name}"))?;
+    // Created as `File::create` would (0666 less the umask), not 0600; by
+    // our own opener, whose error is the system's alone (`tempfile_in`
+    // adds the temporary file's path, a second name for the same fault).
+    let open = |tmp: &Path| {
+        let mut options = OpenOptions::new();
+        options.read(true).write(true).create_new(true);
+        #[cfg(unix)]
+        std::os::unix::fs::OpenOptionsExt::mode(&mut options, 0o666);
+        options.open(tmp)
+    };
+    let mut tmp = tempfile::Builder::new()
+        .prefix(".isoscope-")
+        .suffix(".part")
+        .make_in(dir, open)
+        .with_context(|| format!("cannot create {name}"))?;
     let t = {
         let mut w = BufWriter::new(tmp.as_file_mut());
         let t = write(&mut w)?;

@@ -223,10 +223,12 @@ impl fmt::Display for WavError {
 }
 
 impl std::error::Error for WavError {
+    /// The cause's own cause: its message is in this one's already (an
+    /// error chain printed whole would say it twice).
     fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
         match self {
-            WavError::Io(e) => Some(e),
-            WavError::Wav(e) => Some(e),
+            WavError::Io(e) => e.source(),
+            WavError::Wav(e) => e.source(),
             _ => None,
         }
     }

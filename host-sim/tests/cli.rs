@@ -1189,3 +1189,55 @@ fn a_gzipped_den_file_loads_like_the_plain_one() {
         assert_eq!(text(&out.stdout), text(&plain.stdout), "{name}");
     }
 }
+
+/// A file that cannot be written is one plain error line that says why
+/// once: not the system's message twice, nor the temporary file's name.
+#[test]
+fn a_write_error_says_its_cause_once() {
+    let dir = TempDir::new("write-error");
+    let missing = dir.0.join("no-such-dir");
+    let cases: [(&str, &[&str]); 7] = [
+        ("x.png", &["render", "--demo", "sphere:8", "--size", "32", "-o", "OUT"]),
+        (
+            "x.gif",
+            &["render", "--demo", "sphere:8", "--size", "32", "--anim-frames", "2", "--animate", "OUT"],
+        ),
+        ("x.wav", &["wav", "--demo", "sphere:8", "--seconds", "0.01", "-o", "OUT"]),
+        ("x.csv", &["contour", "--demo", "sphere:8", "-o", "OUT"]),
+        ("x.svg", &["contour", "--demo", "sphere:8", "--format", "svg", "-o", "OUT"]),
+        ("x.txt", &["stats", "--demo", "sphere:8", "--samples", "OUT"]),
+        ("x.1", &["manpage", "-o", "OUT"]),
+    ];
+    for (name, args) in cases {
+        let path = path_str(&missing.join(name));
+        let cause = std::fs::File::create(&path).unwrap_err().to_string();
+        let args: Vec<&str> = args.iter().map(|a| if *a == "OUT" { path.as_str() } else { a }).collect();
+        let out = run(&args);
+        assert_eq!(out.status.code(), Some(1), "{args:?}");
+        let err = said(&out);
+        let last = err.lines().last().unwrap_or_default();
+        assert_eq!(last, format!("isoscope-sim: error: cannot create {path}: {cause}"), "{args:?}: {err}");
+    }
+    // A full disk, where there is one to try.
+    if std::path::Path::new("/dev/full").exists() {
+        let cause = {
+            use std::io::Write as _;
+            let mut full = std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
+            full.write_all(&[0; 1 << 16]).and_then(|()| full.flush()).unwrap_err().to_string()
+        };
+        for args in [
+            &["render", "--demo", "sphere:8", "--size", "32", "-o", "/dev/full"][..],
+            &["wav", "--demo", "sphere:8", "--seconds", "0.01", "-o", "/dev/full"],
+            &["contour", "--demo", "sphere:8", "-o", "/dev/full"],
+        ] {
+            let out = run(args);
+            let err = said(&out);
+            let last = err.lines().last().unwrap_or_default();
+            assert_eq!(
+                last,
+                format!("isoscope-sim: error: cannot write /dev/full: {cause}"),
+                "{args:?}: {err}"
+            );
+        }
+    }
+}
