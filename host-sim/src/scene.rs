@@ -216,6 +216,10 @@ pub fn with_board<R>(
         let grow = cfg.memory == Memory::Host && !loaded.whole() && capacity.points < HOST_MAX_POINTS;
         if grow {
             capacity = host_capacity(capacity.slice_bytes, capacity.extent, capacity.points * 4);
+            // The volume is fed again from its first frame.
+            if let Some(p) = progress {
+                p.restart();
+            }
             continue;
         }
         return f(&mut board, capacity);
@@ -455,4 +459,33 @@ pub fn render(
     let mut screen = crate::phosphor::Phosphor::new(picture).context("invalid picture settings")?;
     refresh(&mut screen, scene, frames, progress);
     Ok(screen)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::volume::{Dims, Samples};
+    use isoscope_core::demo::Demo;
+
+    fn demo(d: Demo, n: usize) -> WireVolume {
+        let mut data = vec![0f32; n * n * n];
+        d.fill(n, &mut data).unwrap();
+        WireVolume::new(Dims(n, n, n), &Samples::F32(data), [1.0; 3]).unwrap()
+    }
+
+    /// A surface larger than the host's first memory is fed again with
+    /// more: the progress counts that pass anew, and so ends at its total
+    /// (it counted past it, to 200%, when each pass added to the last).
+    #[test]
+    fn progress_ends_at_its_total_when_the_memory_grows() {
+        let vol = demo(Demo::Gyroid, 32);
+        let cfg = SceneConfig { levels: vec![Demo::Gyroid.default_level()], ..SceneConfig::default() };
+        let progress =
+            Progress::with_output("contouring", crate::board::frames_for(&vol, &cfg.send().unwrap()), false);
+        let scene =
+            with_board(&vol, &cfg, Some(&progress), |board, capacity| Ok(scene_of(board, capacity, &cfg)))
+                .unwrap();
+        assert!(scene.capacity.points > HOST_START_POINTS, "the memory did not grow: {:?}", scene.capacity);
+        assert_eq!(progress.done(), progress.total());
+    }
 }
