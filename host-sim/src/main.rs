@@ -8,7 +8,7 @@ use isoscope_core::contour::grid::{Plane, Volume};
 use isoscope_core::contour::trace::Traversal;
 use isoscope_core::engine::Board;
 use isoscope_core::view::{Projection, View};
-use isoscope_sim::animate::{AnimConfig, AnimFormat, animate};
+use isoscope_sim::animate::{AnimConfig, AnimFormat, animate_board};
 use isoscope_sim::board::frames_for;
 use isoscope_sim::contour::{Job, contour_volume, work_units, write_csv};
 use isoscope_sim::link::WireVolume;
@@ -714,6 +714,9 @@ fn contour(args: &ContourArgs) -> Result<()> {
             "isoscope-sim: warning: the volume is {nx}x{ny}x{nz}: its {} slices have no 2x2 cells to contour",
             planes.iter().map(|p| p.name()).collect::<Vec<_>>().join(", ")
         );
+    } else if result.stats.commands == 0 {
+        let values = isoscope_sim::info::summarize(&vol, isoscope_sim::info::LEVEL_BINS);
+        eprintln!("isoscope-sim: {}", scene::nothing_drawn("the export", &levels, Some(&values)));
     }
     if let Format::Csv = args.format {
         match &args.output {
@@ -815,10 +818,17 @@ fn render_animation(args: &RenderArgs, path: &std::path::Path) -> Result<()> {
     picture.bits = args.scene.view.bits;
     picture.show_blanked = args.show_blanked;
     let anim = AnimConfig { frames: args.anim_frames, turn_deg: args.turn, format, ..AnimConfig::default() };
+    anim.validate()?;
+    let contouring = Progress::new("contouring (frames fed to the board)", frames_for(&volume, &cfg.send()?));
     let progress = Progress::new("animating", anim.frames as usize);
     let st = write_whole(path, |w| {
-        animate(&volume, &cfg, picture, &anim, w, Some(&progress))
-            .with_context(|| format!("cannot write {}", path.display()))
+        scene::with_board(&volume, &cfg, Some(&contouring), |board, capacity| {
+            // What the still picture has to say (the board's memory, an
+            // empty picture, a flickering one) holds for every frame.
+            print_remarks(&scene::scene_of(board, &volume, capacity, &cfg));
+            animate_board(board, &cfg, picture, &anim, w, Some(&progress))
+        })
+        .with_context(|| format!("cannot write {}", path.display()))
     })?;
     eprintln!(
         "isoscope-sim: wrote {} ({} frames, {}x{}, {:.1} degrees a frame, {} bytes)",
@@ -896,17 +906,22 @@ fn build_scene(args: &StatsArgs, auto_every: bool) -> Result<Scene> {
         prepare(&args.input, &args.view, &args.board, scene_beam(args), args.beam.rate, auto_every)?;
     let progress = Progress::new("contouring (frames fed to the board)", frames_for(&volume, &cfg.send()?));
     let scene = scene::with_board(&volume, &cfg, Some(&progress), |board, capacity| {
-        Ok(scene::scene_of(board, capacity, &cfg))
+        Ok(scene::scene_of(board, &volume, capacity, &cfg))
     })?;
     finish_scene(&scene, &args.board)?;
     Ok(scene)
 }
 
-/// The scene's remarks on standard error, its samples to `--samples`.
-fn finish_scene(scene: &Scene, board: &BoardArgs) -> Result<()> {
+/// The scene's remarks on standard error.
+fn print_remarks(scene: &Scene) {
     for r in scene.remarks() {
         eprintln!("isoscope-sim: {r}");
     }
+}
+
+/// The scene's remarks on standard error, its samples to `--samples`.
+fn finish_scene(scene: &Scene, board: &BoardArgs) -> Result<()> {
+    print_remarks(scene);
     if let Some(path) = &board.samples {
         write_samples(&scene.samples, path)?;
     }
@@ -991,9 +1006,7 @@ fn send(args: &SendArgs) -> Result<()> {
         }
         let scene = scene::build(&wire, &preview)
             .with_context(|| format!("the {} board cannot take this volume", board.name))?;
-        for r in scene.remarks() {
-            eprintln!("isoscope-sim: {r}");
-        }
+        print_remarks(&scene);
         eprintln!(
             "isoscope-sim: the {} board will show {} polylines, {} points, at {:.1} frames/s",
             board.name,

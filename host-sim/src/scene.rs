@@ -165,6 +165,16 @@ pub struct Scene {
     /// Bytes of the frame recorded for replay ([`isoscope_core::beam::replay`]):
     /// what a board keeps of a still picture to play it at full rate.
     pub replay_bytes: usize,
+    /// The contour levels asked for.
+    pub levels: Vec<f32>,
+    /// The slicing planes asked for.
+    pub planes: Vec<Plane>,
+    /// The volume's extents.
+    pub dims: [u16; 3],
+    /// For a picture with nothing drawn: the volume's values and the
+    /// levels `info` suggests ([`crate::info::summarize`]), to say why and
+    /// what to draw instead (`None` when something is drawn).
+    pub values: Option<crate::info::Summary>,
 }
 
 /// The memory to start with for `vol` under `memory`.
@@ -231,20 +241,23 @@ pub fn with_board<R>(
 /// # Errors
 /// As [`with_board`].
 pub fn build(vol: &WireVolume, cfg: &SceneConfig) -> Result<Scene> {
-    with_board(vol, cfg, None, |board, capacity| Ok(scene_of(board, capacity, cfg)))
+    with_board(vol, cfg, None, |board, capacity| Ok(scene_of(board, vol, capacity, cfg)))
 }
 
-/// The scene the board shows now.
-pub fn scene_of(board: &InProcess<'_>, capacity: Capacity, cfg: &SceneConfig) -> Scene {
+/// The scene the board shows now, of `vol` put on it with `cfg`.
+pub fn scene_of(board: &InProcess<'_>, vol: &WireVolume, capacity: Capacity, cfg: &SceneConfig) -> Scene {
     let engine = board.engine();
     let mut frame = engine.frame();
     let samples: Vec<Sample> = frame.by_ref().collect();
     let surface = engine.surface();
     let replay_bytes = replay_bytes(engine.frame(), samples.len());
+    let frame = frame.stats();
+    // Only an empty picture needs the values (a pass over the volume).
+    let values = (frame.lit_samples == 0).then(|| values(vol)).flatten();
     Scene {
         samples,
         commands: engine.commands().collect(),
-        frame: frame.stats(),
+        frame,
         chain: engine.chain_stats(),
         loaded: board.loaded(),
         polylines: surface.map_or(0, |s| s.polylines()),
@@ -257,7 +270,27 @@ pub fn scene_of(board: &InProcess<'_>, capacity: Capacity, cfg: &SceneConfig) ->
         sample_rate_hz: cfg.sample_rate_hz,
         seconds: board.loaded().seconds,
         replay_bytes,
+        levels: cfg.levels.clone(),
+        planes: cfg.planes.clone(),
+        dims: vol.dims,
+        values,
     }
+}
+
+/// `vol`'s summary as `info` gives it, over the bins whose first suggested
+/// level a file is drawn at when none is given.
+fn values(vol: &WireVolume) -> Option<crate::info::Summary> {
+    use crate::volume::{Dims, Dtype, LoadedVolume};
+    use isoscope_core::wire::SampleType;
+    let [nx, ny, nz] = vol.dims.map(usize::from);
+    let dtype = match vol.sample_type {
+        SampleType::U8 => Dtype::U8,
+        SampleType::U16 => Dtype::U16,
+        SampleType::I16 => Dtype::I16,
+        SampleType::F32 => Dtype::F32,
+    };
+    let loaded = LoadedVolume::from_bytes(&vol.bytes, Dims(nx, ny, nz), dtype).ok()?;
+    Some(crate::info::summarize(&loaded, crate::info::LEVEL_BINS))
 }
 
 /// Bytes a board's replay of `frame` (of `samples` samples) takes, as the
@@ -332,7 +365,7 @@ impl Scene {
             ));
         }
         if self.frame.lit_samples == 0 {
-            out.push("warning: nothing is drawn (no contour at these levels on these slices)".into());
+            out.push(nothing_drawn("the picture", &self.levels, self.values.as_ref()));
         }
         out
     }
@@ -381,6 +414,40 @@ impl Scene {
         kv("pipeline_ms", format!("{:.3}", self.seconds.iter().sum::<f64>() * 1e3));
         s
     }
+}
+
+/// The warning for `what` (a picture, an export) with nothing drawn at
+/// `levels`: why, from the volume's `values` (its summary, as `info` gives
+/// it; over [`crate::info::LEVEL_BINS`], the level a file is drawn at
+/// without one is its first suggestion) when known, and the level to try
+/// instead.
+pub fn nothing_drawn(what: &str, levels: &[f32], values: Option<&crate::info::Summary>) -> String {
+    let list = |l: &[f32]| l.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(", ");
+    let (asked, is) = match levels {
+        [one] => (format!("level {one}"), "is"),
+        many => (format!("levels {}", list(many)), "are"),
+    };
+    let why = match values.map(|v| (v.range, v.suggested.as_slice())) {
+        None => format!("no contour at {asked} on these slices"),
+        Some((None, _)) => format!("nothing to contour at {asked}: the volume has no finite value"),
+        Some((Some((lo, hi)), suggested)) => {
+            let mut why = if levels.iter().any(|&l| (lo..=hi).contains(&l)) {
+                format!("no contour at {asked} on these slices; the volume's values run from {lo} to {hi}")
+            } else {
+                format!("{asked} {is} outside the volume's values, {lo} to {hi}")
+            };
+            match suggested {
+                [] => why.push_str(" (no level to suggest: it is constant)"),
+                [one] => why.push_str(&format!("; try --level {one} (the level `info` suggests)")),
+                [first, ..] => why.push_str(&format!(
+                    "; try --level {first} (levels `info` suggests: {})",
+                    list(suggested)
+                )),
+            }
+            why
+        }
+    };
+    format!("warning: {what} is empty: {why}")
 }
 
 /// "every slice", "every 2nd slice", "every 16th slice".
@@ -482,9 +549,10 @@ mod tests {
         let cfg = SceneConfig { levels: vec![Demo::Gyroid.default_level()], ..SceneConfig::default() };
         let progress =
             Progress::with_output("contouring", crate::board::frames_for(&vol, &cfg.send().unwrap()), false);
-        let scene =
-            with_board(&vol, &cfg, Some(&progress), |board, capacity| Ok(scene_of(board, capacity, &cfg)))
-                .unwrap();
+        let scene = with_board(&vol, &cfg, Some(&progress), |board, capacity| {
+            Ok(scene_of(board, &vol, capacity, &cfg))
+        })
+        .unwrap();
         assert!(scene.capacity.points > HOST_START_POINTS, "the memory did not grow: {:?}", scene.capacity);
         assert_eq!(progress.done(), progress.total());
     }

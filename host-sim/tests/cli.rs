@@ -1241,3 +1241,51 @@ fn a_write_error_says_its_cause_once() {
         }
     }
 }
+
+/// A picture with nothing drawn says so, on every command that makes one
+/// (and `contour`'s export): the volume's values and the levels `info`
+/// suggests, and no false note that there was no room to order it.
+#[test]
+fn an_empty_picture_says_why_and_what_to_draw() {
+    // The bins whose first suggestion a file is drawn at without --level.
+    let bins = isoscope_sim::info::LEVEL_BINS.to_string();
+    let info = text(&run(&["info", "--demo", "hydrogen:16", "--bins", &bins]).stdout);
+    let field =
+        |k: &str| info.lines().find_map(|l| l.strip_prefix(k)).unwrap_or_else(|| panic!("{k}: {info}"));
+    let (min, max, suggested) = (field("min="), field("max="), field("suggested_levels="));
+    let first = suggested.split(',').next().unwrap();
+    let dir = TempDir::new("empty");
+    let file = |name: &str| path_str(&dir.0.join(name));
+    let (png, gif, wav) = (file("e.png"), file("e.gif"), file("e.wav"));
+    for (what, args) in [
+        ("picture", vec!["render", "--size", "32", "-o", &png]),
+        ("picture", vec!["render", "--size", "32", "--anim-frames", "2", "--animate", &gif]),
+        ("picture", vec!["stats"]),
+        ("picture", vec!["wav", "--seconds", "0.01", "-o", &wav]),
+        ("picture", vec!["contour", "--format", "svg"]),
+        ("export", vec!["contour"]),
+    ] {
+        let mut all = args.clone();
+        all.extend(["--demo", "hydrogen:16", "--level", "5"]);
+        let err = said(&run(&all));
+        let want = format!(
+            "isoscope-sim: warning: the {what} is empty: level 5 is outside the volume's values, {min} to {max}; \
+             try --level {first} (levels `info` suggests: {})\n",
+            suggested.replace(',', ", ")
+        );
+        assert!(err.contains(&want), "{args:?}: {err}");
+        assert!(!err.contains("no room"), "{args:?}: {err}");
+    }
+    // A level within the values that meets no slice says so.
+    let err =
+        said(&run(&["stats", "--demo", "hydrogen:16", "--level", "0.5", "--axes", "xy", "--every", "20"]));
+    assert!(
+        err.contains(&format!(
+            "no contour at level 0.5 on these slices; the volume's values run from {min} to {max}"
+        )),
+        "{err}"
+    );
+    // A picture with something in it says nothing of the kind.
+    let err = said(&run(&["stats", "--demo", "hydrogen:16"]));
+    assert!(!err.contains("empty"), "{err}");
+}
