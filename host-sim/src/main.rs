@@ -937,7 +937,12 @@ fn wav(args: &WavArgs) -> Result<()> {
     if let Some(step) = args.lit_step {
         beam.lit_step = step;
     }
-    let (volume, cfg) = prepare(&args.input, &args.view, &args.board, beam, None, true)?;
+    if args.audio_rate == 0 {
+        bail!("--audio-rate must be at least 1 Hz");
+    }
+    let (volume, mut cfg) = prepare(&args.input, &args.view, &args.board, beam, None, true)?;
+    // The frame plays at the audio rate: its refresh rate is counted at it.
+    cfg.sample_rate_hz = args.audio_rate;
     let scene = scene::build(&volume, &cfg)?;
     finish_scene(&scene, &args.board)?;
     let wcfg = WavConfig {

@@ -317,8 +317,9 @@ impl Scene {
         self.frame.fps(self.sample_rate_hz as f32)
     }
 
-    /// A `note:` line when the board's memory cut the picture short, or a
-    /// warning when nothing is drawn.
+    /// A `note:` line when the board's memory cut the picture short, and a
+    /// warning when nothing is drawn or the frame refreshes below
+    /// [`FLICKER_HZ`].
     pub fn remarks(&self) -> Vec<String> {
         let mut out = Vec::new();
         let l = &self.loaded;
@@ -366,8 +367,45 @@ impl Scene {
         }
         if self.frame.lit_samples == 0 {
             out.push(nothing_drawn("the picture", &self.levels, self.values.as_ref()));
+        } else if self.fps() < FLICKER_HZ {
+            out.push(self.flickers());
         }
         out
+    }
+
+    /// The warning for a frame that refreshes below [`FLICKER_HZ`], with
+    /// the ways to shorten it that apply to this picture.
+    fn flickers(&self) -> String {
+        let mut ways = Vec::new();
+        // The frame's length goes about as the slices drawn, less its
+        // jumps and dwells, which shrink more slowly: a quarter more.
+        let drawn = f32::from(self.loaded.every.max(1));
+        let every = (1.25 * drawn * FLICKER_HZ / self.fps().max(f32::MIN_POSITIVE)).ceil();
+        let longest = self.dims.iter().copied().max().unwrap_or(0);
+        if every < f32::from(longest.min(255)) {
+            ways.push(format!("fewer slices (--every {every})"));
+        }
+        if self.planes.len() > 1 {
+            ways.push("fewer planes (--axes)".into());
+        }
+        if self.levels.len() > 1 {
+            ways.push(format!("fewer levels (of these {})", self.levels.len()));
+        }
+        if self.dims.iter().all(|&n| n >= 4) {
+            ways.push("a coarser volume (--downsample 2)".into());
+        }
+        let advice = match ways.as_slice() {
+            [] => String::new(),
+            [one] => format!("; draw {one}"),
+            [init @ .., last] => format!("; draw {} or {last}", init.join(", ")),
+        };
+        format!(
+            "warning: the picture flickers: one frame is {} samples, {:.1} frames/s at {} samples/s \
+             (below {FLICKER_HZ} a scope's picture flickers){advice}",
+            self.frame.samples,
+            self.fps(),
+            self.sample_rate_hz
+        )
     }
 
     /// Bytes a board lends to the replay: its two slice buffers (none on
@@ -415,6 +453,10 @@ impl Scene {
         s
     }
 }
+
+/// Refreshes a second below which a picture flickers on a P31 screen
+/// (from about 15 it is readable but flickering, from about 40 steady).
+pub const FLICKER_HZ: f32 = 25.0;
 
 /// The warning for `what` (a picture, an export) with nothing drawn at
 /// `levels`: why, from the volume's `values` (its summary, as `info` gives

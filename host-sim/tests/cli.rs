@@ -1289,3 +1289,55 @@ fn an_empty_picture_says_why_and_what_to_draw() {
     let err = said(&run(&["stats", "--demo", "hydrogen:16"]));
     assert!(!err.contains("empty"), "{err}");
 }
+
+/// A frame that refreshes below 25 times a second is said to flicker, at
+/// the rate it plays (a WAV file's audio rate, the DAC's for the others),
+/// with the ways to shorten it that apply; a steady one is not.
+#[test]
+fn a_flickering_picture_is_said_to_flicker() {
+    let dir = TempDir::new("flicker");
+    let (wav, png) = (path_str(&dir.0.join("f.wav")), path_str(&dir.0.join("f.png")));
+    // hydrogen:24 at 48 kHz: about 10 frames/s; every 3rd slice is above 25.
+    let base = ["--demo", "hydrogen:24"];
+    for args in [
+        vec!["wav", "--seconds", "0.01", "-o", &wav],
+        vec!["render", "--size", "32", "--rate", "40000", "-o", &png],
+        vec!["stats", "--rate", "40000"],
+    ] {
+        let all: Vec<&str> = args.iter().copied().chain(base).collect();
+        let out = run(&all);
+        assert!(out.status.success(), "{all:?}: {}", said(&out));
+        let err = said(&out);
+        let line = err.lines().find(|l| l.contains("flickers")).unwrap_or_else(|| panic!("{all:?}: {err}"));
+        assert!(line.starts_with("isoscope-sim: warning: the picture flickers: one frame is "), "{line}");
+        let rate = if args[0] == "wav" { "48000" } else { "40000" };
+        assert!(line.contains(&format!(" frames/s at {rate} samples/s (below 25 ")), "{line}");
+        assert!(line.contains("draw fewer slices (--every ") && line.contains("--downsample 2"), "{line}");
+        // One level: fewer levels is no way; three planes: fewer is.
+        assert!(!line.contains("levels") && line.contains("fewer planes (--axes)"), "{line}");
+        let every: usize = line.split("--every ").nth(1).unwrap().split(')').next().unwrap().parse().unwrap();
+        // The stride it names does make the picture steady.
+        let mut again = all.clone();
+        let every = every.to_string();
+        again.extend(["--every", &every]);
+        let err = said(&run(&again));
+        assert!(!err.contains("flickers"), "{again:?}: {err}");
+    }
+    // One plane and two levels: the advice follows the options.
+    let err = said(&run(&[
+        "stats",
+        "--demo",
+        "hydrogen:24",
+        "--rate",
+        "20000",
+        "--axes",
+        "xy",
+        "--level",
+        "0.1",
+        "--level",
+        "0.2",
+    ]));
+    assert!(err.contains("fewer levels (of these 2)") && !err.contains("--axes"), "{err}");
+    // At 1 MS/s the demo is steady.
+    assert!(!said(&run(&["stats", "--demo", "hydrogen:24"])).contains("flickers"));
+}
