@@ -17,7 +17,9 @@ use isoscope_sim::phosphor::PhosphorConfig;
 use isoscope_sim::progress::Progress;
 use isoscope_sim::scene::{self, Scene, SceneConfig, write_samples};
 use isoscope_sim::volume::{DemoSpec, Dims, Dtype, Endian, LoadedVolume, Samples};
-use isoscope_sim::wav::{WavChannels, WavConfig, WavFormat, audio_beam, write_wav_file};
+use isoscope_sim::wav::{
+    WavChannels, WavConfig, WavFormat, audio_beam, sample_frames, write_wav_file_counted,
+};
 use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -819,7 +821,7 @@ fn render_animation(args: &RenderArgs, path: &std::path::Path) -> Result<()> {
     picture.show_blanked = args.show_blanked;
     let anim = AnimConfig { frames: args.anim_frames, turn_deg: args.turn, format, ..AnimConfig::default() };
     anim.validate()?;
-    let contouring = Progress::new("contouring (frames fed to the board)", frames_for(&volume, &cfg.send()?));
+    let contouring = contouring_progress(&volume, &cfg)?;
     let progress = Progress::new("animating", anim.frames as usize);
     let st = write_whole(path, |w| {
         scene::with_board(&volume, &cfg, Some(&contouring), |board, capacity| {
@@ -904,12 +906,22 @@ fn prepare(
 fn build_scene(args: &StatsArgs, auto_every: bool) -> Result<Scene> {
     let (volume, cfg) =
         prepare(&args.input, &args.view, &args.board, scene_beam(args), args.beam.rate, auto_every)?;
-    let progress = Progress::new("contouring (frames fed to the board)", frames_for(&volume, &cfg.send()?));
-    let scene = scene::with_board(&volume, &cfg, Some(&progress), |board, capacity| {
-        Ok(scene::scene_of(board, &volume, capacity, &cfg))
-    })?;
+    let scene = draw(&volume, &cfg)?;
     finish_scene(&scene, &args.board)?;
     Ok(scene)
+}
+
+/// The frame of `volume` with `cfg`, with progress as the board is fed.
+fn draw(volume: &WireVolume, cfg: &SceneConfig) -> Result<Scene> {
+    let progress = contouring_progress(volume, cfg)?;
+    scene::with_board(volume, cfg, Some(&progress), |board, capacity| {
+        Ok(scene::scene_of(board, volume, capacity, cfg))
+    })
+}
+
+/// Progress over the frames that feed `volume` to the board with `cfg`.
+fn contouring_progress(volume: &WireVolume, cfg: &SceneConfig) -> Result<Progress> {
+    Ok(Progress::new("contouring (frames fed to the board)", frames_for(volume, &cfg.send()?)))
 }
 
 /// The scene's remarks on standard error.
@@ -943,7 +955,7 @@ fn wav(args: &WavArgs) -> Result<()> {
     let (volume, mut cfg) = prepare(&args.input, &args.view, &args.board, beam, None, true)?;
     // The frame plays at the audio rate: its refresh rate is counted at it.
     cfg.sample_rate_hz = args.audio_rate;
-    let scene = scene::build(&volume, &cfg)?;
+    let scene = draw(&volume, &cfg)?;
     finish_scene(&scene, &args.board)?;
     let wcfg = WavConfig {
         rate_hz: args.audio_rate,
@@ -954,7 +966,10 @@ fn wav(args: &WavArgs) -> Result<()> {
         invert_beam: args.invert_beam,
         ..WavConfig::default()
     };
-    let st = write_wav_file(&args.output, &scene.samples, &wcfg)?;
+    let length = sample_frames(&wcfg, scene.samples.len())?;
+    let writing =
+        Progress::new("writing audio (sample frames)", usize::try_from(length).unwrap_or(usize::MAX));
+    let st = write_wav_file_counted(&args.output, &scene.samples, &wcfg, Some(&writing))?;
     eprintln!(
         "isoscope-sim: wrote {} ({:.2} s at {} Hz, {} channels; one frame is {} samples: {:.1} frames/s)",
         args.output.display(),

@@ -303,8 +303,11 @@ pub fn unit_to_pcm16(v: f64) -> i16 {
 }
 
 /// Check `cfg` and work out the length in sample frames for a frame of
-/// `frame_samples` samples.
-fn sample_frames(cfg: &WavConfig, frame_samples: usize) -> Result<u64, WavError> {
+/// `frame_samples` samples: what [`write_wav`] writes.
+///
+/// # Errors
+/// As [`write_wav`], for the configuration.
+pub fn sample_frames(cfg: &WavConfig, frame_samples: usize) -> Result<u64, WavError> {
     if cfg.rate_hz == 0 {
         return Err(WavError::ZeroRate);
     }
@@ -347,6 +350,20 @@ fn sample_frames(cfg: &WavConfig, frame_samples: usize) -> Result<u64, WavError>
 /// finite or under one sample frame, `bits` not in `1 ..= 16`, a file over
 /// 4 GiB, or the writer's error.
 pub fn write_wav<W: Write + Seek>(out: W, frame: &[Sample], cfg: &WavConfig) -> Result<WavStats, WavError> {
+    write_wav_counted(out, frame, cfg, None)
+}
+
+/// [`write_wav`], counting the sample frames written in `progress` (its
+/// total [`WavStats::sample_frames`]).
+///
+/// # Errors
+/// As [`write_wav`].
+pub fn write_wav_counted<W: Write + Seek>(
+    out: W,
+    frame: &[Sample],
+    cfg: &WavConfig,
+    progress: Option<&crate::progress::Progress>,
+) -> Result<WavStats, WavError> {
     let total = sample_frames(cfg, frame.len())?;
     let max = u16::MAX >> (16 - cfg.bits);
     let clipped = frame.iter().filter(|s| s.x > max || s.y > max).count();
@@ -378,6 +395,11 @@ pub fn write_wav<W: Write + Seek>(out: W, frame: &[Sample], cfg: &WavConfig) -> 
     let repeats = total / frame.len() as u64;
     let rest = (total % frame.len() as u64) as usize * channels;
     let pieces = |all: usize| (0..repeats).map(move |_| all).chain([rest]);
+    let written = |len: usize| {
+        if let Some(p) = progress {
+            p.add(len / channels);
+        }
+    };
     match cfg.format {
         WavFormat::Pcm16 => {
             let pcm: Vec<i16> = values.iter().map(|&v| unit_to_pcm16(v)).collect();
@@ -390,6 +412,7 @@ pub fn write_wav<W: Write + Seek>(out: W, frame: &[Sample], cfg: &WavConfig) -> 
                     }
                     w.flush()?;
                 }
+                written(len);
             }
         }
         WavFormat::Float32 => {
@@ -398,6 +421,7 @@ pub fn write_wav<W: Write + Seek>(out: W, frame: &[Sample], cfg: &WavConfig) -> 
                 for &v in &float[..len] {
                     writer.write_sample(v)?;
                 }
+                written(len);
             }
         }
     }
@@ -420,11 +444,24 @@ pub fn write_wav<W: Write + Seek>(out: W, frame: &[Sample], cfg: &WavConfig) -> 
 /// As [`write_wav`] (the configuration is checked before the file is
 /// created), or the file cannot be created or written; the path named.
 pub fn write_wav_file(path: impl AsRef<Path>, frame: &[Sample], cfg: &WavConfig) -> anyhow::Result<WavStats> {
+    write_wav_file_counted(path, frame, cfg, None)
+}
+
+/// [`write_wav_file`], with progress as [`write_wav_counted`] counts it.
+///
+/// # Errors
+/// As [`write_wav_file`].
+pub fn write_wav_file_counted(
+    path: impl AsRef<Path>,
+    frame: &[Sample],
+    cfg: &WavConfig,
+    progress: Option<&crate::progress::Progress>,
+) -> anyhow::Result<WavStats> {
     use anyhow::Context as _;
     let path = path.as_ref();
     sample_frames(cfg, frame.len())?;
     crate::outfile::write_whole(path, |w| {
-        write_wav(w, frame, cfg).with_context(|| format!("cannot write {}", path.display()))
+        write_wav_counted(w, frame, cfg, progress).with_context(|| format!("cannot write {}", path.display()))
     })
 }
 

@@ -1341,3 +1341,75 @@ fn a_flickering_picture_is_said_to_flicker() {
     // At 1 MS/s the demo is steady.
     assert!(!said(&run(&["stats", "--demo", "hydrogen:24"])).contains("flickers"));
 }
+
+/// Run `isoscope-sim` with standard error on a terminal (a
+/// pseudo-terminal): what it wrote there, once it has exited.
+#[cfg(unix)]
+fn run_on_a_terminal(args: &[&str]) -> String {
+    use std::io::Read as _;
+    let pty = isoscope_sim::tty::open_pty().expect("no pseudo-terminal");
+    let slave = std::fs::File::from(pty.slave.try_clone().unwrap());
+    let mut child = Command::new(env!("CARGO_BIN_EXE_isoscope-sim"))
+        .args(args)
+        .stdout(std::process::Stdio::null())
+        .stderr(slave)
+        .spawn()
+        .unwrap();
+    let (mut master, mut seen, mut buf) = (&pty.master, Vec::new(), [0u8; 4096]);
+    let mut drain = |seen: &mut Vec<u8>| {
+        while let Ok(n @ 1..) = master.read(&mut buf) {
+            seen.extend_from_slice(&buf[..n]);
+        }
+    };
+    let status = loop {
+        drain(&mut seen);
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    drain(&mut seen);
+    let seen = String::from_utf8_lossy(&seen).into_owned();
+    assert!(status.success(), "{args:?}: {seen}");
+    seen
+}
+
+/// The progress lines a terminal was shown: `(label, done, total)`, the
+/// last of each redraw.
+#[cfg(unix)]
+fn progress_lines(seen: &str) -> Vec<(String, u64, u64)> {
+    seen.split(['\r', '\n'])
+        .filter_map(|l| {
+            let (label, rest) = l.rsplit_once(": ")?;
+            let (count, pct) = rest.split_once(" (")?;
+            let (done, total) = count.split_once('/')?;
+            pct.strip_suffix("%)")?;
+            Some((label.to_owned(), done.parse().ok()?, total.parse().ok()?))
+        })
+        .collect()
+}
+
+/// On a terminal, `wav` shows its progress as the other commands do (the
+/// contouring, then the writing), and no progress line passes its total:
+/// `render` of a surface that outgrows the host's first memory counted to
+/// 200% when its second pass added to the first.
+#[cfg(unix)]
+#[test]
+fn progress_is_shown_for_wav_and_never_passes_its_total() {
+    let dir = TempDir::new("progress");
+    let (wav, png) = (path_str(&dir.0.join("p.wav")), path_str(&dir.0.join("p.png")));
+    let seen = run_on_a_terminal(&["wav", "--demo", "hydrogen:16", "--seconds", "0.5", "-o", &wav]);
+    let lines = progress_lines(&seen);
+    for label in ["contouring (frames fed to the board)", "writing audio (sample frames)"] {
+        let last = lines.iter().rfind(|(l, ..)| l == label).unwrap_or_else(|| panic!("no {label}: {seen:?}"));
+        assert_eq!(last.1, last.2, "{label} did not finish: {seen:?}");
+    }
+    assert!(lines.iter().any(|(_, done, total)| (done, total) == (&24_000, &24_000)), "{seen:?}");
+    // gyroid:32 outgrows the host's first 65,536 points.
+    let seen = run_on_a_terminal(&["render", "--demo", "gyroid:32", "--size", "32", "-o", &png]);
+    let lines = progress_lines(&seen);
+    assert!(lines.iter().any(|(l, ..)| l.starts_with("contouring")), "{seen:?}");
+    for (label, done, total) in &lines {
+        assert!(done <= total, "{label}: {done}/{total}: {seen:?}");
+    }
+}
