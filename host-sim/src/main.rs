@@ -527,6 +527,14 @@ struct ContourArgs {
     view: ViewArgs,
 }
 
+/// Warn when `path`'s name says another format than the `format` it is
+/// written as ([`isoscope_sim::outfile::misnamed`]).
+fn warn_misnamed(path: &std::path::Path, format: &str, extensions: &[&str]) {
+    if let Some(w) = isoscope_sim::outfile::misnamed(path, format, extensions) {
+        eprintln!("isoscope-sim: warning: {w}");
+    }
+}
+
 /// Write `text` to standard output. A reader that went away (`| head`)
 /// is not an error: the output is simply not wanted any more.
 fn print_out(text: &str) -> Result<()> {
@@ -665,6 +673,13 @@ fn contour_svg(args: &ContourArgs) -> Result<()> {
 }
 
 fn contour(args: &ContourArgs) -> Result<()> {
+    if let Some(path) = &args.output {
+        match args.format {
+            Format::Csv => warn_misnamed(path, "CSV", &["csv", "txt"]),
+            Format::Svg => warn_misnamed(path, "SVG", &["svg"]),
+            Format::None => {}
+        }
+    }
     if let Format::Svg = args.format {
         return contour_svg(args);
     }
@@ -782,6 +797,7 @@ fn render(args: &RenderArgs) -> Result<()> {
     if args.frames == 0 {
         bail!("--frames must be at least 1");
     }
+    warn_misnamed(&args.output, "a PNG", &["png"]);
     let scene = build_scene(&args.scene, true)?;
     let mut cfg = PhosphorConfig::with_size(args.size, args.size);
     cfg.bits = args.scene.view.bits;
@@ -952,6 +968,7 @@ fn wav(args: &WavArgs) -> Result<()> {
     if args.audio_rate == 0 {
         bail!("--audio-rate must be at least 1 Hz");
     }
+    warn_misnamed(&args.output, "a WAV file", &["wav"]);
     let (volume, mut cfg) = prepare(&args.input, &args.view, &args.board, beam, None, true)?;
     // The frame plays at the audio rate: its refresh rate is counted at it.
     cfg.sample_rate_hz = args.audio_rate;
@@ -1087,6 +1104,9 @@ fn send(args: &SendArgs) -> Result<()> {
 fn device(args: &DeviceArgs) -> Result<()> {
     use isoscope_sim::board::{HostBuffers, host_capacity};
     use isoscope_sim::device::{Board as VirtualBoard, DeviceOptions};
+    if let Some(path) = &args.snapshot {
+        warn_misnamed(path, "a PNG", &["png"]);
+    }
     let mut opts = DeviceOptions {
         baud: args.baud,
         snapshot: args.snapshot.clone(),

@@ -64,6 +64,21 @@ pub fn write_whole<T>(path: &Path, write: impl FnOnce(&mut Out<'_>) -> Result<T>
     Ok(t)
 }
 
+/// A warning for an output at `path` that is written as `format` ("a
+/// PNG") whatever its name, when the name ends in an extension other than
+/// `extensions` (compared in any case; the first is the usual one):
+/// `x.jpg` for a PNG. `None` for a name with one of them, or with none
+/// (`/dev/stdout`). Every command whose output's format is fixed (not
+/// chosen by the name, as `--animate`'s is) warns with it, and writes.
+pub fn misnamed(path: &Path, format: &str, extensions: &[&str]) -> Option<String> {
+    let ext = path.extension()?.to_str().unwrap_or("?");
+    if extensions.iter().any(|e| e.eq_ignore_ascii_case(ext)) {
+        return None;
+    }
+    let usual = extensions.first().map_or(String::new(), |e| format!("; name it .{e}"));
+    Some(format!("{}: written as {format}, whatever its .{ext} says{usual}", path.display()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -104,5 +119,16 @@ mod tests {
         }
         let e = write_whole(Path::new("/nonexistent-dir/x.png"), |_| Ok(())).unwrap_err();
         assert!(format!("{e:#}").starts_with("cannot create /nonexistent-dir/x.png"), "{e:#}");
+    }
+
+    #[test]
+    fn a_name_that_says_another_format_is_named() {
+        let w = misnamed(Path::new("out/x.jpg"), "a PNG", &["png"]).unwrap();
+        assert_eq!(w, "out/x.jpg: written as a PNG, whatever its .jpg says; name it .png");
+        for ok in ["x.png", "X.PNG", "x", "/dev/stdout", ".png"] {
+            assert_eq!(misnamed(Path::new(ok), "a PNG", &["png"]), None, "{ok}");
+        }
+        assert!(misnamed(Path::new("x.svg"), "CSV", &["csv", "txt"]).is_some());
+        assert_eq!(misnamed(Path::new("x.TXT"), "CSV", &["csv", "txt"]), None);
     }
 }

@@ -1413,3 +1413,39 @@ fn progress_is_shown_for_wav_and_never_passes_its_total() {
         assert!(done <= total, "{label}: {done}/{total}: {seen:?}");
     }
 }
+
+/// An output whose name says another format than the one written is
+/// warned of (and written all the same: its content is what the command
+/// makes); a name that agrees, in any case, or has no extension is not.
+#[test]
+fn an_output_named_for_another_format_is_warned_of() {
+    let dir = TempDir::new("misnamed");
+    let file = |name: &str| path_str(&dir.0.join(name));
+    for (name, format, usual, args) in [
+        ("x.jpg", "a PNG", "png", vec!["render", "--demo", "sphere:8", "--size", "32", "-o"]),
+        ("x.mp3", "a WAV file", "wav", vec!["wav", "--demo", "sphere:8", "--seconds", "0.01", "-o"]),
+        ("x.csv", "SVG", "svg", vec!["contour", "--demo", "sphere:8", "--format", "svg", "-o"]),
+        ("x.svg", "CSV", "csv", vec!["contour", "--demo", "sphere:8", "-o"]),
+    ] {
+        let path = file(name);
+        let ext = name.rsplit('.').next().unwrap();
+        let mut all = args.clone();
+        all.push(&path);
+        let out = run(&all);
+        assert!(out.status.success(), "{all:?}: {}", said(&out));
+        let want = format!(
+            "isoscope-sim: warning: {path}: written as {format}, whatever its .{ext} says; name it .{usual}\n"
+        );
+        assert!(said(&out).starts_with(&want), "{all:?}: {}", said(&out));
+        assert!(std::fs::metadata(&path).unwrap().len() > 0);
+        // Named for what it is (in any case), or not named for anything: no warning.
+        for good in [format!("y.{usual}"), format!("Z.{}", usual.to_uppercase()), "plain".to_owned()] {
+            let path = file(&good);
+            let mut all = args.clone();
+            all.push(&path);
+            let err = said(&run(&all));
+            assert!(!err.contains("whatever its"), "{all:?}: {err}");
+        }
+    }
+    assert!(std::fs::read(file("x.jpg")).unwrap().starts_with(b"\x89PNG"));
+}
