@@ -1449,3 +1449,28 @@ fn an_output_named_for_another_format_is_warned_of() {
     }
     assert!(std::fs::read(file("x.jpg")).unwrap().starts_with(b"\x89PNG"));
 }
+
+/// The README's sentence on its main job says the size that command
+/// writes (render's default `--size`) and the size of the picture shown
+/// above it (`docs/img/hydrogen.png`), which differ.
+#[test]
+fn the_readme_says_the_main_jobs_picture_size() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+    let flat = readme.split_whitespace().collect::<Vec<_>>().join(" ");
+    let start = flat.find("The first command").expect("no sentence on the main job");
+    let sentence = &flat[start..start + flat[start..].find(". ").unwrap_or(flat.len() - start)];
+    let help = text(&run(&["render", "--help"]).stdout);
+    let size: u32 = help
+        .split("--size <SIZE>")
+        .nth(1)
+        .and_then(|h| h.split("[default: ").nth(1))
+        .and_then(|d| d.split(']').next())
+        .and_then(|d| d.parse().ok())
+        .unwrap_or_else(|| panic!("no default --size in:\n{help}"));
+    let png = std::fs::read(root.join("docs/img/hydrogen.png")).unwrap();
+    let shown = u32::from_be_bytes(png[16..20].try_into().unwrap());
+    assert!(sentence.contains(&format!("{size}x{size}")), "the default {size} is not said: {sentence}");
+    assert!(sentence.contains(&format!("{shown}x{shown}")), "the picture's {shown} is not said: {sentence}");
+    assert!(sentence.contains(&format!("--size {shown}")), "{sentence}");
+}
