@@ -310,12 +310,15 @@ struct WavArgs {
     /// line per millisecond at the audio rate).
     #[arg(long)]
     lit_step: Option<f32>,
-    /// Add a third channel with the beam (+1 lit, -1 blanked) for a Z input.
+    /// Add a third channel with the beam for a Z input: +1 blanked, -1 lit
+    /// (Z high blanks, as on the firmware's blank pin).
     #[arg(long)]
     beam_channel: bool,
-    /// Beam channel inverted (for Z inputs that blank on a positive voltage).
-    #[arg(long)]
-    invert_beam: bool,
+    /// The beam channel blanks low: -1 blanked, +1 lit (for a Z input that
+    /// blanks on a negative voltage; as the firmware's feature
+    /// blank-active-low).
+    #[arg(long, requires = "beam_channel")]
+    blank_active_low: bool,
     /// 32-bit float samples instead of 16-bit PCM.
     #[arg(long)]
     float: bool,
@@ -980,7 +983,7 @@ fn wav(args: &WavArgs) -> Result<()> {
         format: if args.float { WavFormat::Float32 } else { WavFormat::Pcm16 },
         seconds: args.seconds,
         bits: args.view.bits,
-        invert_beam: args.invert_beam,
+        blank_active_low: args.blank_active_low,
         ..WavConfig::default()
     };
     let length = sample_frames(&wcfg, scene.samples.len())?;

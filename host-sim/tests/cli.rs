@@ -1474,3 +1474,48 @@ fn the_readme_says_the_main_jobs_picture_size() {
     assert!(sentence.contains(&format!("{shown}x{shown}")), "the picture's {shown} is not said: {sentence}");
     assert!(sentence.contains(&format!("--size {shown}")), "{sentence}");
 }
+
+/// `wav --beam-channel` blanks high, as the firmware's blank pin (PB0)
+/// does by default: +1 while the beam is off, -1 while it draws; and
+/// `--blank-active-low` turns it over, as the firmware's feature of that
+/// name does. The old `--invert-beam` is gone, not quietly the default.
+#[test]
+fn the_beam_channel_blanks_high_as_the_firmware_does() {
+    let dir = TempDir::new("beam-channel");
+    let (wav, samples) = (path_str(&dir.0.join("z.wav")), path_str(&dir.0.join("z.txt")));
+    let base = [
+        "wav",
+        "--demo",
+        "sphere:8",
+        "--seconds",
+        "0.05",
+        "--beam-channel",
+        "-o",
+        &wav,
+        "--samples",
+        &samples,
+    ];
+    for (extra, blanked) in [(None, 32767i16), (Some("--blank-active-low"), -32767)] {
+        let args: Vec<&str> = base.iter().copied().chain(extra).collect();
+        let out = run(&args);
+        assert!(out.status.success(), "{args:?}: {}", said(&out));
+        let lit: Vec<bool> = std::fs::read_to_string(&samples)
+            .unwrap()
+            .lines()
+            .map(|l| l.split(' ').nth(2) == Some("1"))
+            .collect();
+        assert!(lit.contains(&true) && lit.contains(&false));
+        let mut r = hound::WavReader::open(&wav).unwrap();
+        assert_eq!(r.spec().channels, 3);
+        let z: Vec<i16> = r.samples::<i16>().map(Result::unwrap).skip(2).step_by(3).collect();
+        for (i, (&z, &lit)) in z.iter().zip(lit.iter().cycle()).enumerate() {
+            assert_eq!(z, if lit { -blanked } else { blanked }, "{extra:?}: sample frame {i}");
+        }
+    }
+    for args in [
+        &["wav", "--demo", "sphere:8", "--beam-channel", "--invert-beam", "-o", &wav][..],
+        &["wav", "--demo", "sphere:8", "--blank-active-low", "-o", &wav],
+    ] {
+        assert_eq!(run(args).status.code(), Some(2), "{args:?}");
+    }
+}
