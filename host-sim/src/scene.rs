@@ -480,9 +480,9 @@ pub fn nothing_drawn(what: &str, levels: &[f32], values: Option<&crate::info::Su
             };
             match suggested {
                 [] => why.push_str(" (no level to suggest: it is constant)"),
-                [one] => why.push_str(&format!("; try --level {one} (the level `info` suggests)")),
+                [one] => why.push_str(&format!("; try --level {one} (Otsu's threshold, see `info`)")),
                 [first, ..] => why.push_str(&format!(
-                    "; try --level {first} (levels `info` suggests: {})",
+                    "; try --level {first} (suggested levels {}, see `info`)",
                     list(suggested)
                 )),
             }

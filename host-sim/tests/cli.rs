@@ -1270,7 +1270,7 @@ fn an_empty_picture_says_why_and_what_to_draw() {
         let err = said(&run(&all));
         let want = format!(
             "isoscope-sim: warning: the {what} is empty: level 5 is outside the volume's values, {min} to {max}; \
-             try --level {first} (levels `info` suggests: {})\n",
+             try --level {first} (suggested levels {}, see `info`)\n",
             suggested.replace(',', ", ")
         );
         assert!(err.contains(&want), "{args:?}: {err}");
