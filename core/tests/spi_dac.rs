@@ -159,10 +159,18 @@ fn events(log: &Log) -> Vec<Ev> {
     log.borrow().clone()
 }
 
+/// A Z pin that is high while the beam is lit (`BlankActiveLow`): the
+/// polarity most of these tests were written for.
+fn lit_high() -> Config {
+    Config::new().with_z_polarity(ZPolarity::BlankActiveLow)
+}
+
 #[test]
 fn command_words() {
     let c = Config::new();
     assert_eq!(c, Config::default());
+    // Blanked while high, as the firmware's blank pin and wav's beam.
+    assert_eq!(c.z_polarity, ZPolarity::BlankActiveHigh);
     assert_eq!(c.command_word(Channel::A, 0x123), 0x3123);
     assert_eq!(c.command_word(Channel::B, 0xABC), 0xBABC);
     assert_eq!(c.command_word(Channel::A, 0), 0x3000);
@@ -179,7 +187,7 @@ fn command_words() {
 #[test]
 fn exact_spi_words() {
     let rig = Rig::new(&[0x3123, 0xBABC, 0x3000, 0xB000, 0x3FFF, 0xBFFF, 0x3800, 0xB001], &[LO]);
-    let (mut dac, log) = rig.dac(Config::new());
+    let (mut dac, log) = rig.dac(lit_high());
     dac.write([
         Sample::new(0x123, 0xABC, OFF),
         Sample::new(0, 0, OFF),
@@ -206,7 +214,8 @@ fn exact_spi_words() {
 
 #[test]
 fn config_bits_reach_the_bus() {
-    let rig = Rig::new(&[0x5123, 0xDABC], &[LO]);
+    // Blanked: Z high, the default polarity.
+    let rig = Rig::new(&[0x5123, 0xDABC], &[HI]);
     let config = Config::new().with_gain(Gain::X2).with_vref_buffer(VrefBuffer::Buffered);
     let (mut dac, _log) = rig.dac(config);
     assert_eq!(dac.config(), config);
@@ -215,7 +224,7 @@ fn config_bits_reach_the_bus() {
 }
 
 #[test]
-fn z_only_on_change_and_in_order_active_high() {
+fn z_only_on_change_and_in_order_blank_active_low() {
     let rig = Rig::new(
         &[
             0x3001, 0xB001, // off (first sample: Z driven)
@@ -227,7 +236,7 @@ fn z_only_on_change_and_in_order_active_high() {
         ],
         &[LO, HI, LO, HI],
     );
-    let (mut dac, log) = rig.dac(Config::new());
+    let (mut dac, log) = rig.dac(lit_high());
     assert_eq!(dac.beam(), None);
     dac.write([
         Sample::new(1, 1, OFF),
@@ -264,9 +273,9 @@ fn z_only_on_change_and_in_order_active_high() {
 }
 
 #[test]
-fn z_only_on_change_and_in_order_active_low() {
+fn z_only_on_change_and_in_order_by_default_blank_active_high() {
     let rig = Rig::new(&[0x3007, 0xB007, 0x3008, 0xB008, 0x3009, 0xB009, 0x300A, 0xB00A], &[LO, HI, LO]);
-    let (mut dac, log) = rig.dac(Config::new().with_z_polarity(ZPolarity::ActiveLow));
+    let (mut dac, log) = rig.dac(Config::new());
     dac.write([
         Sample::new(7, 7, ON),
         Sample::new(8, 8, ON),
@@ -279,7 +288,7 @@ fn z_only_on_change_and_in_order_active_low() {
         [
             Spi(0x3007),
             Spi(0xB007),
-            Z(LO), // unknown -> On: after the move, low lights
+            Z(LO), // unknown -> On: after the move, low lights (high blanks)
             Spi(0x3008),
             Spi(0xB008),
             Z(HI), // On -> Off: high blanks, before the move
@@ -296,7 +305,7 @@ fn z_only_on_change_and_in_order_active_low() {
 #[test]
 fn blank_drives_z_once() {
     let rig = Rig::new(&[0x3001, 0xB001, 0x3001, 0xB001], &[LO, HI, LO]);
-    let (mut dac, log) = rig.dac(Config::new());
+    let (mut dac, log) = rig.dac(lit_high());
     dac.blank().unwrap();
     dac.blank().unwrap(); // already off: no pin write
     dac.write_sample(Sample::new(1, 1, OFF)).unwrap();
@@ -312,7 +321,7 @@ fn ldac_pulses_after_both_words() {
     let rig = Rig::new(&[0x3123, 0xBABC, 0x3456, 0xB789, 0x3000, 0xB000], &[HI, LO]);
     let ldac = rig.ldac(&[HI, LO, HI, LO, HI, LO], None);
     let log = rig.log.clone();
-    let mut dac = Mcp4922::new(rig.spi, rig.z, ldac, Config::new());
+    let mut dac = Mcp4922::new(rig.spi, rig.z, ldac, lit_high());
     dac.write([Sample::new(0x123, 0xABC, ON), Sample::new(0x456, 0x789, ON), Sample::new(0, 0, OFF)])
         .unwrap();
     assert_eq!(
@@ -344,7 +353,7 @@ fn out_of_range_before_any_traffic() {
         let rig = Rig::new(&[], &[]);
         let ldac = rig.ldac(&[], None);
         let log = rig.log.clone();
-        let mut dac = Mcp4922::new(rig.spi, rig.z, ldac, Config::new());
+        let mut dac = Mcp4922::new(rig.spi, rig.z, ldac, lit_high());
         assert_eq!(dac.write([Sample::new(x, y, ON)]), Err(SpiDacError::OutOfRange { x, y }));
         assert_eq!(dac.write_sample(Sample::new(x, y, OFF)), Err(SpiDacError::OutOfRange { x, y }));
         assert_eq!(dac.beam(), None);
@@ -357,7 +366,7 @@ fn out_of_range_before_any_traffic() {
 #[test]
 fn out_of_range_stops_the_write_after_earlier_samples() {
     let rig = Rig::new(&[0x3FFF, 0xBFFF], &[HI]);
-    let (mut dac, log) = rig.dac(Config::new());
+    let (mut dac, log) = rig.dac(lit_high());
     let result =
         dac.write([Sample::new(4095, 4095, ON), Sample::new(4095, 4096, OFF), Sample::new(1, 1, ON)]);
     assert_eq!(result, Err(SpiDacError::OutOfRange { x: 4095, y: 4096 }));
@@ -372,7 +381,7 @@ fn spi_error_propagates_and_stops_the_sample() {
     // Transaction 0 (X of the first sample) fails: Z must not light.
     let mut rig = Rig::new(&[0x3002, 0xB002], &[HI]);
     rig.spi.fail_at = Some(0);
-    let (mut dac, log) = rig.dac(Config::new());
+    let (mut dac, log) = rig.dac(lit_high());
     assert_eq!(
         dac.write([Sample::new(1, 1, ON), Sample::new(2, 2, ON)]),
         Err(SpiDacError::Spi(ErrorKind::Other))
@@ -391,7 +400,7 @@ fn spi_error_on_y_leaves_ldac_high() {
     rig.spi.fail_at = Some(1);
     let ldac = rig.ldac(&[HI], None);
     let log = rig.log.clone();
-    let mut dac = Mcp4922::new(rig.spi, rig.z, ldac, Config::new());
+    let mut dac = Mcp4922::new(rig.spi, rig.z, ldac, lit_high());
     assert_eq!(dac.write_sample(Sample::new(1, 1, OFF)), Err(SpiDacError::Spi(ErrorKind::Other)));
     // /LDAC stays high: the half-written sample never reaches the outputs.
     assert_eq!(events(&log), [Z(LO), Ldac(HI), Spi(0x3001)]);
@@ -404,7 +413,7 @@ fn z_pin_error_propagates_and_is_retried() {
     // Z fails when lighting: the state is unknown, so the next lit sample
     // drives Z again even though it was asked for On already.
     let rig = Rig::with_z_error(&[0x3001, 0xB001, 0x3002, 0xB002, 0x3003, 0xB003], &[HI, HI, LO], Some(0));
-    let (mut dac, log) = rig.dac(Config::new());
+    let (mut dac, log) = rig.dac(lit_high());
     assert_eq!(dac.write([Sample::new(1, 1, ON), Sample::new(9, 9, ON)]), Err(SpiDacError::Pin(pin_error())));
     assert_eq!(dac.beam(), None);
     dac.write_sample(Sample::new(2, 2, ON)).unwrap();
@@ -430,7 +439,7 @@ fn z_pin_error_propagates_and_is_retried() {
 #[test]
 fn z_error_when_blanking_stops_before_the_move() {
     let rig = Rig::with_z_error(&[], &[LO], Some(0));
-    let (mut dac, log) = rig.dac(Config::new());
+    let (mut dac, log) = rig.dac(lit_high());
     assert_eq!(dac.write_sample(Sample::new(5, 5, OFF)), Err(SpiDacError::Pin(pin_error())));
     assert_eq!(events(&log), [Z(LO)]);
     finish(dac);
@@ -440,7 +449,7 @@ fn z_error_when_blanking_stops_before_the_move() {
 fn ldac_error_propagates() {
     let rig = Rig::new(&[0x3001, 0xB001], &[]);
     let ldac = rig.ldac(&[HI, LO], Some(1));
-    let mut dac = Mcp4922::new(rig.spi, rig.z, ldac, Config::new());
+    let mut dac = Mcp4922::new(rig.spi, rig.z, ldac, lit_high());
     assert_eq!(dac.write_sample(Sample::new(1, 1, ON)), Err(SpiDacError::Pin(pin_error())));
     assert_eq!(dac.beam(), None); // Z never lit
     let mut ldac = finish(dac);
@@ -451,7 +460,7 @@ fn ldac_error_propagates() {
 fn release_returns_the_parts() {
     let rig = Rig::new(&[0x3001, 0xB001], &[LO]);
     let ldac = rig.ldac(&[HI, LO], None);
-    let mut dac = Mcp4922::new(rig.spi, rig.z, ldac, Config::new());
+    let mut dac = Mcp4922::new(rig.spi, rig.z, ldac, lit_high());
     dac.write_sample(Sample::new(1, 1, OFF)).unwrap();
     let (mut spi, mut z, mut ldac) = dac.release();
     // The same mocks, with their expectations played out.
@@ -480,7 +489,7 @@ fn no_pin_and_errors_display() {
 #[test]
 fn works_through_a_mut_reference() {
     let rig = Rig::new(&[0x3001, 0xB001], &[LO]);
-    let (mut dac, _log) = rig.dac(Config::new());
+    let (mut dac, _log) = rig.dac(lit_high());
     fn play<D: Dac>(mut d: D) -> Result<(), D::Error> {
         d.write([Sample::new(1, 1, OFF)])
     }

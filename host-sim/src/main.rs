@@ -8,7 +8,7 @@ use isoscope_core::contour::grid::{Plane, Volume};
 use isoscope_core::contour::trace::Traversal;
 use isoscope_core::engine::Board;
 use isoscope_core::view::{Projection, View};
-use isoscope_sim::animate::{AnimConfig, AnimFormat, animate};
+use isoscope_sim::animate::{AnimConfig, AnimFormat, animate_board};
 use isoscope_sim::board::frames_for;
 use isoscope_sim::contour::{Job, contour_volume, work_units, write_csv};
 use isoscope_sim::link::WireVolume;
@@ -17,7 +17,9 @@ use isoscope_sim::phosphor::PhosphorConfig;
 use isoscope_sim::progress::Progress;
 use isoscope_sim::scene::{self, Scene, SceneConfig, write_samples};
 use isoscope_sim::volume::{DemoSpec, Dims, Dtype, Endian, LoadedVolume, Samples};
-use isoscope_sim::wav::{WavChannels, WavConfig, WavFormat, audio_beam, write_wav_file};
+use isoscope_sim::wav::{
+    WavChannels, WavConfig, WavFormat, audio_beam, sample_frames, write_wav_file_counted,
+};
 use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -35,11 +37,12 @@ use std::process::ExitCode;
   isoscope-sim contour --demo torus:32 --format svg -o torus.svg
   isoscope-sim contour data.raw --dims 256x256x128 --dtype i16 --level 300 -o ct.csv
 
-Volumes: NIfTI-1 (.nii, .hdr), NRRD (.nrrd, .nhdr), MRC/CCP4 (.mrc, .map, .ccp4), Gaussian cube
-(.cube), VTK legacy (.vtk), VolPack .den (any may end in .gz), a raw file (--dims NXxNYxNZ --dtype
-u8|u16|i16|f32, x fastest), or --demo hydrogen:N | gyroid:N | sphere:N | torus:N. Levels: --level L
-(repeatable); a demo has a default. A volume too large for a board (send, --board) is downsampled
-to fit, with a note; --downsample N and --crop X0:X1,Y0:Y1,Z0:Z1 choose.
+Volumes: NIfTI-1 (.nii, .hdr), NRRD (.nrrd, .nhdr), MRC/CCP4 (.mrc, .map, .ccp4, .mrcs, .rec),
+Gaussian cube (.cube, .cub), VTK legacy (.vtk), VolPack (.den) (any may end in .gz), a raw file
+(--dims NXxNYxNZ --dtype u8|u16|i16|f32, x fastest), or --demo hydrogen:N | gyroid:N | sphere:N |
+torus:N. Levels: --level L (repeatable); a demo has a default. A volume too large for a board
+(send, --board) is downsampled to fit, with a note; --downsample N and --crop X0:X1,Y0:Y1,Z0:Z1
+choose.
 'isoscope-sim COMMAND --help' lists every flag."
 )]
 struct Cli {
@@ -307,12 +310,15 @@ struct WavArgs {
     /// line per millisecond at the audio rate).
     #[arg(long)]
     lit_step: Option<f32>,
-    /// Add a third channel with the beam (+1 lit, -1 blanked) for a Z input.
+    /// Add a third channel with the beam for a Z input: +1 blanked, -1 lit
+    /// (Z high blanks, as on the firmware's blank pin).
     #[arg(long)]
     beam_channel: bool,
-    /// Beam channel inverted (for Z inputs that blank on a positive voltage).
-    #[arg(long)]
-    invert_beam: bool,
+    /// The beam channel blanks low: -1 blanked, +1 lit (for a Z input that
+    /// blanks on a negative voltage; as the firmware's feature
+    /// blank-active-low).
+    #[arg(long, requires = "beam_channel")]
+    blank_active_low: bool,
     /// 32-bit float samples instead of 16-bit PCM.
     #[arg(long)]
     float: bool,
@@ -469,9 +475,9 @@ struct StatsArgs {
 #[derive(Args, Debug, Clone)]
 struct Source {
     /// Volume file: NIfTI-1 (.nii, .hdr), NRRD (.nrrd, .nhdr), MRC/CCP4
-    /// (.mrc, .map, .ccp4), Gaussian cube (.cube), VTK legacy (.vtk),
-    /// VolPack .den (any may end in .gz), or raw samples, x fastest (a raw
-    /// file needs --dims and --dtype).
+    /// (.mrc, .map, .ccp4, .mrcs, .rec), Gaussian cube (.cube, .cub), VTK
+    /// legacy (.vtk), VolPack (.den) (any may end in .gz), or raw samples,
+    /// x fastest (a raw file needs --dims and --dtype).
     #[arg(conflicts_with = "demo")]
     input: Option<PathBuf>,
     /// Volume extents NXxNYxNZ (a 2D grid has NZ = 1).
@@ -554,6 +560,14 @@ struct ContourArgs {
     view: ViewArgs,
 }
 
+/// Warn when `path`'s name says another format than the `format` it is
+/// written as ([`isoscope_sim::outfile::misnamed`]).
+fn warn_misnamed(path: &std::path::Path, format: &str, extensions: &[&str]) {
+    if let Some(w) = isoscope_sim::outfile::misnamed(path, format, extensions) {
+        eprintln!("isoscope-sim: warning: {w}");
+    }
+}
+
 /// Write `text` to standard output. A reader that went away (`| head`)
 /// is not an error: the output is simply not wanted any more.
 fn print_out(text: &str) -> Result<()> {
@@ -621,6 +635,10 @@ fn load(source: &Source) -> Result<(LoadedVolume, Option<DemoSpec>)> {
                     }
                     return Ok((v, None));
                 }
+                // A file that cannot be opened to look at says why; one
+                // that can names no format that loads.
+                std::fs::File::open(path).with_context(|| format!("cannot read {}", path.display()))?;
+                return Err(isoscope_sim::volume::LoadError::UnknownFormat(path.clone()).into());
             }
             let dims = source.dims.context("a raw volume file needs --dims NXxNYxNZ (and --dtype)")?;
             let dtype = source.dtype.context("a raw volume file needs --dtype u8|u16|i16|f32")?;
@@ -692,6 +710,13 @@ fn contour_svg(args: &ContourArgs) -> Result<()> {
 }
 
 fn contour(args: &ContourArgs) -> Result<()> {
+    if let Some(path) = &args.output {
+        match args.format {
+            Format::Csv => warn_misnamed(path, "CSV", &["csv", "txt"]),
+            Format::Svg => warn_misnamed(path, "SVG", &["svg"]),
+            Format::None => {}
+        }
+    }
     if let Format::Svg = args.format {
         return contour_svg(args);
     }
@@ -743,6 +768,9 @@ fn contour(args: &ContourArgs) -> Result<()> {
             "isoscope-sim: warning: the volume is {nx}x{ny}x{nz}: its {} slices have no 2x2 cells to contour",
             planes.iter().map(|p| p.name()).collect::<Vec<_>>().join(", ")
         );
+    } else if result.stats.commands == 0 {
+        let values = isoscope_sim::info::summarize(&vol, isoscope_sim::info::LEVEL_BINS);
+        eprintln!("isoscope-sim: {}", scene::nothing_drawn("the export", &levels, Some(&values)));
     }
     if let Format::Csv = args.format {
         match &args.output {
@@ -806,6 +834,7 @@ fn render(args: &RenderArgs) -> Result<()> {
     if args.frames == 0 {
         bail!("--frames must be at least 1");
     }
+    warn_misnamed(&args.output, "a PNG", &["png"]);
     let scene = build_scene(&args.scene, true)?;
     let mut cfg = PhosphorConfig::with_size(args.size, args.size);
     cfg.bits = args.scene.view.bits;
@@ -844,10 +873,17 @@ fn render_animation(args: &RenderArgs, path: &std::path::Path) -> Result<()> {
     picture.bits = args.scene.view.bits;
     picture.show_blanked = args.show_blanked;
     let anim = AnimConfig { frames: args.anim_frames, turn_deg: args.turn, format, ..AnimConfig::default() };
+    anim.validate()?;
+    let contouring = contouring_progress(&volume, &cfg)?;
     let progress = Progress::new("animating", anim.frames as usize);
     let st = write_whole(path, |w| {
-        animate(&volume, &cfg, picture, &anim, w, Some(&progress))
-            .with_context(|| format!("cannot write {}", path.display()))
+        scene::with_board(&volume, &cfg, Some(&contouring), |board, capacity| {
+            // What the still picture has to say (the board's memory, an
+            // empty picture, a flickering one) holds for every frame.
+            print_remarks(&scene::scene_of(board, &volume, capacity, &cfg));
+            animate_board(board, &cfg, picture, &anim, w, Some(&progress))
+        })
+        .with_context(|| format!("cannot write {}", path.display()))
     })?;
     eprintln!(
         "isoscope-sim: wrote {} ({} frames, {}x{}, {:.1} degrees a frame, {} bytes)",
@@ -931,19 +967,34 @@ fn prepare(
 fn build_scene(args: &StatsArgs, auto_every: bool) -> Result<Scene> {
     let (volume, cfg) =
         prepare(&args.input, &args.view, &args.board, scene_beam(args), args.beam.rate, auto_every)?;
-    let progress = Progress::new("contouring (frames fed to the board)", frames_for(&volume, &cfg.send()?));
-    let scene = scene::with_board(&volume, &cfg, Some(&progress), |board, capacity| {
-        Ok(scene::scene_of(board, capacity, &cfg))
-    })?;
+    let scene = draw(&volume, &cfg)?;
     finish_scene(&scene, &args.board)?;
     Ok(scene)
 }
 
-/// The scene's remarks on standard error, its samples to `--samples`.
-fn finish_scene(scene: &Scene, board: &BoardArgs) -> Result<()> {
+/// The frame of `volume` with `cfg`, with progress as the board is fed.
+fn draw(volume: &WireVolume, cfg: &SceneConfig) -> Result<Scene> {
+    let progress = contouring_progress(volume, cfg)?;
+    scene::with_board(volume, cfg, Some(&progress), |board, capacity| {
+        Ok(scene::scene_of(board, volume, capacity, cfg))
+    })
+}
+
+/// Progress over the frames that feed `volume` to the board with `cfg`.
+fn contouring_progress(volume: &WireVolume, cfg: &SceneConfig) -> Result<Progress> {
+    Ok(Progress::new("contouring (frames fed to the board)", frames_for(volume, &cfg.send()?)))
+}
+
+/// The scene's remarks on standard error.
+fn print_remarks(scene: &Scene) {
     for r in scene.remarks() {
         eprintln!("isoscope-sim: {r}");
     }
+}
+
+/// The scene's remarks on standard error, its samples to `--samples`.
+fn finish_scene(scene: &Scene, board: &BoardArgs) -> Result<()> {
+    print_remarks(scene);
     if let Some(path) = &board.samples {
         write_samples(&scene.samples, path)?;
     }
@@ -959,8 +1010,14 @@ fn wav(args: &WavArgs) -> Result<()> {
     if let Some(step) = args.lit_step {
         beam.lit_step = step;
     }
-    let (volume, cfg) = prepare(&args.input, &args.view, &args.board, beam, None, true)?;
-    let scene = scene::build(&volume, &cfg)?;
+    if args.audio_rate == 0 {
+        bail!("--audio-rate must be at least 1 Hz");
+    }
+    warn_misnamed(&args.output, "a WAV file", &["wav"]);
+    let (volume, mut cfg) = prepare(&args.input, &args.view, &args.board, beam, None, true)?;
+    // The frame plays at the audio rate: its refresh rate is counted at it.
+    cfg.sample_rate_hz = args.audio_rate;
+    let scene = draw(&volume, &cfg)?;
     finish_scene(&scene, &args.board)?;
     let wcfg = WavConfig {
         rate_hz: args.audio_rate,
@@ -968,10 +1025,13 @@ fn wav(args: &WavArgs) -> Result<()> {
         format: if args.float { WavFormat::Float32 } else { WavFormat::Pcm16 },
         seconds: args.seconds,
         bits: args.view.bits,
-        invert_beam: args.invert_beam,
+        blank_active_low: args.blank_active_low,
         ..WavConfig::default()
     };
-    let st = write_wav_file(&args.output, &scene.samples, &wcfg)?;
+    let length = sample_frames(&wcfg, scene.samples.len())?;
+    let writing =
+        Progress::new("writing audio (sample frames)", usize::try_from(length).unwrap_or(usize::MAX));
+    let st = write_wav_file_counted(&args.output, &scene.samples, &wcfg, Some(&writing))?;
     eprintln!(
         "isoscope-sim: wrote {} ({:.2} s at {} Hz, {} channels; one frame is {} samples: {:.1} frames/s)",
         args.output.display(),
@@ -1030,9 +1090,7 @@ fn send(args: &SendArgs) -> Result<()> {
         }
         let scene = scene::build(&wire, &preview)
             .with_context(|| format!("the {} board cannot take this volume", board.name))?;
-        for r in scene.remarks() {
-            eprintln!("isoscope-sim: {r}");
-        }
+        print_remarks(&scene);
         eprintln!(
             "isoscope-sim: the {} board will show {} polylines, {} points, at {:.1} frames/s",
             board.name,
@@ -1105,6 +1163,9 @@ fn send(args: &SendArgs) -> Result<()> {
 fn device(args: &DeviceArgs) -> Result<()> {
     use isoscope_sim::board::{HostBuffers, host_capacity};
     use isoscope_sim::device::{Board as VirtualBoard, DeviceOptions};
+    if let Some(path) = &args.snapshot {
+        warn_misnamed(path, "a PNG", &["png"]);
+    }
     let mut opts = DeviceOptions {
         baud: args.baud,
         snapshot: args.snapshot.clone(),

@@ -39,15 +39,21 @@ pub fn write_whole<T>(path: &Path, write: impl FnOnce(&mut Out<'_>) -> Result<T>
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
-    // Created as `File::create` would (0666 less the umask), not 0600.
-    let mut builder = tempfile::Builder::new();
-    builder.prefix(".isoscope-").suffix(".part");
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        builder.permissions(std::fs::Permissions::from_mode(0o666));
-    }
-    let mut tmp = builder.tempfile_in(dir).with_context(|| format!("cannot create {name}"))?;
+    // Created as `File::create` would (0666 less the umask), not 0600; by
+    // our own opener, whose error is the system's alone (`tempfile_in`
+    // adds the temporary file's path, a second name for the same fault).
+    let open = |tmp: &Path| {
+        let mut options = OpenOptions::new();
+        options.read(true).write(true).create_new(true);
+        #[cfg(unix)]
+        std::os::unix::fs::OpenOptionsExt::mode(&mut options, 0o666);
+        options.open(tmp)
+    };
+    let mut tmp = tempfile::Builder::new()
+        .prefix(".isoscope-")
+        .suffix(".part")
+        .make_in(dir, open)
+        .with_context(|| format!("cannot create {name}"))?;
     let t = {
         let mut w = BufWriter::new(tmp.as_file_mut());
         let t = write(&mut w)?;
@@ -56,6 +62,21 @@ pub fn write_whole<T>(path: &Path, write: impl FnOnce(&mut Out<'_>) -> Result<T>
     };
     tmp.persist(path).map_err(|e| e.error).with_context(|| format!("cannot write {name}"))?;
     Ok(t)
+}
+
+/// A warning for an output at `path` that is written as `format` ("a
+/// PNG") whatever its name, when the name ends in an extension other than
+/// `extensions` (compared in any case; the first is the usual one):
+/// `x.jpg` for a PNG. `None` for a name with one of them, or with none
+/// (`/dev/stdout`). Every command whose output's format is fixed (not
+/// chosen by the name, as `--animate`'s is) warns with it, and writes.
+pub fn misnamed(path: &Path, format: &str, extensions: &[&str]) -> Option<String> {
+    let ext = path.extension()?.to_str().unwrap_or("?");
+    if extensions.iter().any(|e| e.eq_ignore_ascii_case(ext)) {
+        return None;
+    }
+    let usual = extensions.first().map_or(String::new(), |e| format!("; name it .{e}"));
+    Some(format!("{}: written as {format}, whatever its .{ext} says{usual}", path.display()))
 }
 
 #[cfg(test)]
@@ -98,5 +119,16 @@ mod tests {
         }
         let e = write_whole(Path::new("/nonexistent-dir/x.png"), |_| Ok(())).unwrap_err();
         assert!(format!("{e:#}").starts_with("cannot create /nonexistent-dir/x.png"), "{e:#}");
+    }
+
+    #[test]
+    fn a_name_that_says_another_format_is_named() {
+        let w = misnamed(Path::new("out/x.jpg"), "a PNG", &["png"]).unwrap();
+        assert_eq!(w, "out/x.jpg: written as a PNG, whatever its .jpg says; name it .png");
+        for ok in ["x.png", "X.PNG", "x", "/dev/stdout", ".png"] {
+            assert_eq!(misnamed(Path::new(ok), "a PNG", &["png"]), None, "{ok}");
+        }
+        assert!(misnamed(Path::new("x.svg"), "CSV", &["csv", "txt"]).is_some());
+        assert_eq!(misnamed(Path::new("x.TXT"), "CSV", &["csv", "txt"]), None);
     }
 }

@@ -419,17 +419,19 @@ impl fmt::Display for PhosphorError {
             Self::BadPersistence(p) => write!(f, "persistence {p} is not in 0..=1"),
             Self::BadShowBlanked(s) => write!(f, "blanked intensity {s} is not in 0..=1"),
             Self::BadPalette(why) => write!(f, "invalid palette: {why}"),
-            Self::Io(e) => write!(f, "cannot write the PNG file: {e}"),
+            Self::Io(e) => write!(f, "{e}"),
             Self::Png(e) => write!(f, "cannot encode the PNG: {e}"),
         }
     }
 }
 
 impl std::error::Error for PhosphorError {
+    /// The cause's own cause: its message is in this one's already (an
+    /// error chain printed whole would say it twice).
     fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
         match self {
-            Self::Io(e) => Some(e),
-            Self::Png(e) => Some(e),
+            Self::Io(e) => e.source(),
+            Self::Png(e) => e.source(),
             _ => None,
         }
     }

@@ -31,21 +31,78 @@ impl Progress {
         self.done.load(Ordering::Relaxed)
     }
 
+    /// Units in all.
+    pub fn total(&self) -> usize {
+        self.total
+    }
+
     /// One more unit finished.
     pub fn inc(&self) {
-        let done = self.done.fetch_add(1, Ordering::Relaxed) + 1;
-        if !self.enabled {
+        self.add(1);
+    }
+
+    /// `n` more units finished.
+    pub fn add(&self, n: usize) {
+        let done = self.done.fetch_add(n, Ordering::Relaxed).saturating_add(n);
+        if !self.enabled || n == 0 {
             return;
         }
         let Ok(mut last) = self.last.lock() else { return };
         let now = Instant::now();
-        if done == self.total || last.is_none_or(|t| now - t >= Duration::from_millis(100)) {
+        let finished = done >= self.total && done - n < self.total;
+        if finished || last.is_none_or(|t| now - t >= Duration::from_millis(100)) {
             *last = Some(now);
-            let pct = (done * 100).checked_div(self.total).unwrap_or(100);
-            let _ = write!(std::io::stderr(), "\r{}: {done}/{} ({pct}%)", self.label, self.total);
-            if done == self.total {
+            let _ = write!(std::io::stderr(), "\r{}", status(self.label, done, self.total));
+            if finished {
                 let _ = writeln!(std::io::stderr());
             }
         }
+    }
+
+    /// The same work begins again from nothing (done over, e.g. with more
+    /// memory): the count starts again at 0, so it never passes the total.
+    pub fn restart(&self) {
+        self.done.store(0, Ordering::Relaxed);
+        if let Ok(mut last) = self.last.lock() {
+            *last = None;
+        }
+    }
+}
+
+/// The status line of `done` units of `total`: `label: done/total (pct%)`,
+/// the percentage rounded down (100 when there is nothing to do), without
+/// overflow.
+pub fn status(label: &str, done: usize, total: usize) -> String {
+    let pct = (done as u128 * 100).checked_div(total as u128).unwrap_or(100);
+    format!("{label}: {done}/{total} ({pct}%)")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_status_line_counts_to_the_total() {
+        assert_eq!(status("contouring", 0, 7), "contouring: 0/7 (0%)");
+        assert_eq!(status("contouring", 3, 7), "contouring: 3/7 (42%)");
+        assert_eq!(status("contouring", 7, 7), "contouring: 7/7 (100%)");
+        assert_eq!(status("nothing", 0, 0), "nothing: 0/0 (100%)");
+        // No overflow where `done * 100` passes the word.
+        assert_eq!(
+            status("writing", usize::MAX / 2, usize::MAX),
+            format!("writing: {}/{} (49%)", usize::MAX / 2, usize::MAX)
+        );
+    }
+
+    #[test]
+    fn counts_add_up_and_start_again() {
+        let p = Progress::with_output("work", 10, false);
+        p.inc();
+        p.add(4);
+        assert_eq!((p.done(), p.total()), (5, 10));
+        p.restart();
+        assert_eq!(p.done(), 0);
+        (0..10).for_each(|_| p.inc());
+        assert_eq!(p.done(), 10);
     }
 }

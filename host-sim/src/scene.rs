@@ -165,6 +165,16 @@ pub struct Scene {
     /// Bytes of the frame recorded for replay ([`isoscope_core::beam::replay`]):
     /// what a board keeps of a still picture to play it at full rate.
     pub replay_bytes: usize,
+    /// The contour levels asked for.
+    pub levels: Vec<f32>,
+    /// The slicing planes asked for.
+    pub planes: Vec<Plane>,
+    /// The volume's extents.
+    pub dims: [u16; 3],
+    /// For a picture with nothing drawn: the volume's values and the
+    /// levels `info` suggests ([`crate::info::summarize`]), to say why and
+    /// what to draw instead (`None` when something is drawn).
+    pub values: Option<crate::info::Summary>,
 }
 
 /// The memory to start with for `vol` under `memory`.
@@ -216,6 +226,10 @@ pub fn with_board<R>(
         let grow = cfg.memory == Memory::Host && !loaded.whole() && capacity.points < HOST_MAX_POINTS;
         if grow {
             capacity = host_capacity(capacity.slice_bytes, capacity.extent, capacity.points * 4);
+            // The volume is fed again from its first frame.
+            if let Some(p) = progress {
+                p.restart();
+            }
             continue;
         }
         return f(&mut board, capacity);
@@ -227,20 +241,23 @@ pub fn with_board<R>(
 /// # Errors
 /// As [`with_board`].
 pub fn build(vol: &WireVolume, cfg: &SceneConfig) -> Result<Scene> {
-    with_board(vol, cfg, None, |board, capacity| Ok(scene_of(board, capacity, cfg)))
+    with_board(vol, cfg, None, |board, capacity| Ok(scene_of(board, vol, capacity, cfg)))
 }
 
-/// The scene the board shows now.
-pub fn scene_of(board: &InProcess<'_>, capacity: Capacity, cfg: &SceneConfig) -> Scene {
+/// The scene the board shows now, of `vol` put on it with `cfg`.
+pub fn scene_of(board: &InProcess<'_>, vol: &WireVolume, capacity: Capacity, cfg: &SceneConfig) -> Scene {
     let engine = board.engine();
     let mut frame = engine.frame();
     let samples: Vec<Sample> = frame.by_ref().collect();
     let surface = engine.surface();
     let replay_bytes = replay_bytes(engine.frame(), samples.len());
+    let frame = frame.stats();
+    // Only an empty picture needs the values (a pass over the volume).
+    let values = (frame.lit_samples == 0).then(|| values(vol)).flatten();
     Scene {
         samples,
         commands: engine.commands().collect(),
-        frame: frame.stats(),
+        frame,
         chain: engine.chain_stats(),
         loaded: board.loaded(),
         polylines: surface.map_or(0, |s| s.polylines()),
@@ -253,7 +270,27 @@ pub fn scene_of(board: &InProcess<'_>, capacity: Capacity, cfg: &SceneConfig) ->
         sample_rate_hz: cfg.sample_rate_hz,
         seconds: board.loaded().seconds,
         replay_bytes,
+        levels: cfg.levels.clone(),
+        planes: cfg.planes.clone(),
+        dims: vol.dims,
+        values,
     }
+}
+
+/// `vol`'s summary as `info` gives it, over the bins whose first suggested
+/// level a file is drawn at when none is given.
+fn values(vol: &WireVolume) -> Option<crate::info::Summary> {
+    use crate::volume::{Dims, Dtype, LoadedVolume};
+    use isoscope_core::wire::SampleType;
+    let [nx, ny, nz] = vol.dims.map(usize::from);
+    let dtype = match vol.sample_type {
+        SampleType::U8 => Dtype::U8,
+        SampleType::U16 => Dtype::U16,
+        SampleType::I16 => Dtype::I16,
+        SampleType::F32 => Dtype::F32,
+    };
+    let loaded = LoadedVolume::from_bytes(&vol.bytes, Dims(nx, ny, nz), dtype).ok()?;
+    Some(crate::info::summarize(&loaded, crate::info::LEVEL_BINS))
 }
 
 /// Bytes a board's replay of `frame` (of `samples` samples) takes, as the
@@ -280,8 +317,9 @@ impl Scene {
         self.frame.fps(self.sample_rate_hz as f32)
     }
 
-    /// A `note:` line when the board's memory cut the picture short, or a
-    /// warning when nothing is drawn.
+    /// A `note:` line when the board's memory cut the picture short, and a
+    /// warning when nothing is drawn or the frame refreshes below
+    /// [`FLICKER_HZ`].
     pub fn remarks(&self) -> Vec<String> {
         let mut out = Vec::new();
         let l = &self.loaded;
@@ -328,9 +366,46 @@ impl Scene {
             ));
         }
         if self.frame.lit_samples == 0 {
-            out.push("warning: nothing is drawn (no contour at these levels on these slices)".into());
+            out.push(nothing_drawn("the picture", &self.levels, self.values.as_ref()));
+        } else if self.fps() < FLICKER_HZ {
+            out.push(self.flickers());
         }
         out
+    }
+
+    /// The warning for a frame that refreshes below [`FLICKER_HZ`], with
+    /// the ways to shorten it that apply to this picture.
+    fn flickers(&self) -> String {
+        let mut ways = Vec::new();
+        // The frame's length goes about as the slices drawn, less its
+        // jumps and dwells, which shrink more slowly: a quarter more.
+        let drawn = f32::from(self.loaded.every.max(1));
+        let every = (1.25 * drawn * FLICKER_HZ / self.fps().max(f32::MIN_POSITIVE)).ceil();
+        let longest = self.dims.iter().copied().max().unwrap_or(0);
+        if every < f32::from(longest.min(255)) {
+            ways.push(format!("fewer slices (--every {every})"));
+        }
+        if self.planes.len() > 1 {
+            ways.push("fewer planes (--axes)".into());
+        }
+        if self.levels.len() > 1 {
+            ways.push(format!("fewer levels (of these {})", self.levels.len()));
+        }
+        if self.dims.iter().all(|&n| n >= 4) {
+            ways.push("a coarser volume (--downsample 2)".into());
+        }
+        let advice = match ways.as_slice() {
+            [] => String::new(),
+            [one] => format!("; draw {one}"),
+            [init @ .., last] => format!("; draw {} or {last}", init.join(", ")),
+        };
+        format!(
+            "warning: the picture flickers: one frame is {} samples, {:.1} frames/s at {} samples/s \
+             (below {FLICKER_HZ} a scope's picture flickers){advice}",
+            self.frame.samples,
+            self.fps(),
+            self.sample_rate_hz
+        )
     }
 
     /// Bytes a board lends to the replay: its two slice buffers (none on
@@ -377,6 +452,44 @@ impl Scene {
         kv("pipeline_ms", format!("{:.3}", self.seconds.iter().sum::<f64>() * 1e3));
         s
     }
+}
+
+/// Refreshes a second below which a picture flickers on a P31 screen
+/// (from about 15 it is readable but flickering, from about 40 steady).
+pub const FLICKER_HZ: f32 = 25.0;
+
+/// The warning for `what` (a picture, an export) with nothing drawn at
+/// `levels`: why, from the volume's `values` (its summary, as `info` gives
+/// it; over [`crate::info::LEVEL_BINS`], the level a file is drawn at
+/// without one is its first suggestion) when known, and the level to try
+/// instead.
+pub fn nothing_drawn(what: &str, levels: &[f32], values: Option<&crate::info::Summary>) -> String {
+    let list = |l: &[f32]| l.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(", ");
+    let (asked, is) = match levels {
+        [one] => (format!("level {one}"), "is"),
+        many => (format!("levels {}", list(many)), "are"),
+    };
+    let why = match values.map(|v| (v.range, v.suggested.as_slice())) {
+        None => format!("no contour at {asked} on these slices"),
+        Some((None, _)) => format!("nothing to contour at {asked}: the volume has no finite value"),
+        Some((Some((lo, hi)), suggested)) => {
+            let mut why = if levels.iter().any(|&l| (lo..=hi).contains(&l)) {
+                format!("no contour at {asked} on these slices; the volume's values run from {lo} to {hi}")
+            } else {
+                format!("{asked} {is} outside the volume's values, {lo} to {hi}")
+            };
+            match suggested {
+                [] => why.push_str(" (no level to suggest: it is constant)"),
+                [one] => why.push_str(&format!("; try --level {one} (Otsu's threshold, see `info`)")),
+                [first, ..] => why.push_str(&format!(
+                    "; try --level {first} (suggested levels {}, see `info`)",
+                    list(suggested)
+                )),
+            }
+            why
+        }
+    };
+    format!("warning: {what} is empty: {why}")
 }
 
 /// "every slice", "every 2nd slice", "every 16th slice".
@@ -455,4 +568,34 @@ pub fn render(
     let mut screen = crate::phosphor::Phosphor::new(picture).context("invalid picture settings")?;
     refresh(&mut screen, scene, frames, progress);
     Ok(screen)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::volume::{Dims, Samples};
+    use isoscope_core::demo::Demo;
+
+    fn demo(d: Demo, n: usize) -> WireVolume {
+        let mut data = vec![0f32; n * n * n];
+        d.fill(n, &mut data).unwrap();
+        WireVolume::new(Dims(n, n, n), &Samples::F32(data), [1.0; 3]).unwrap()
+    }
+
+    /// A surface larger than the host's first memory is fed again with
+    /// more: the progress counts that pass anew, and so ends at its total
+    /// (it counted past it, to 200%, when each pass added to the last).
+    #[test]
+    fn progress_ends_at_its_total_when_the_memory_grows() {
+        let vol = demo(Demo::Gyroid, 32);
+        let cfg = SceneConfig { levels: vec![Demo::Gyroid.default_level()], ..SceneConfig::default() };
+        let progress =
+            Progress::with_output("contouring", crate::board::frames_for(&vol, &cfg.send().unwrap()), false);
+        let scene = with_board(&vol, &cfg, Some(&progress), |board, capacity| {
+            Ok(scene_of(board, &vol, capacity, &cfg))
+        })
+        .unwrap();
+        assert!(scene.capacity.points > HOST_START_POINTS, "the memory did not grow: {:?}", scene.capacity);
+        assert_eq!(progress.done(), progress.total());
+    }
 }

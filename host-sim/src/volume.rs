@@ -158,6 +158,45 @@ pub struct LoadedVolume {
 /// Voxel spacing when a format gives none.
 pub const UNIT_SPACING: [f32; 3] = [1.0, 1.0, 1.0];
 
+/// The volume files that load by their name or first bytes, with their
+/// name endings: every [`formats::Format`], then VolPack `.den`.
+pub fn known_formats() -> String {
+    let mut names: Vec<String> = formats::Format::ALL
+        .iter()
+        .map(|f| {
+            let ext: Vec<String> = f.extensions().iter().map(|e| format!(".{e}")).collect();
+            format!("{} ({})", f.name(), ext.join(", "))
+        })
+        .collect();
+    names.push("VolPack (.den)".into());
+    names.join(", ")
+}
+
+/// Why a volume file was not loaded.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum LoadError {
+    /// Neither the file's name nor its first bytes tell a format that
+    /// loads, and no `--dims` and `--dtype` say how to read it raw.
+    UnknownFormat(std::path::PathBuf),
+}
+
+impl std::fmt::Display for LoadError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            LoadError::UnknownFormat(path) => write!(
+                f,
+                "{}: neither its name nor its first bytes tell a volume format; volumes load from {} \
+                 files, any of them gzipped (.gz), and from raw samples with --dims NXxNYxNZ and \
+                 --dtype u8|u16|i16|f32",
+                path.display(),
+                known_formats()
+            ),
+        }
+    }
+}
+
+impl std::error::Error for LoadError {}
+
 impl LoadedVolume {
     /// Compute a built-in demo.
     pub fn demo(spec: DemoSpec) -> Result<Self> {
@@ -273,9 +312,9 @@ impl LoadedVolume {
     /// `opts` (which also bound the volume's size), and with the reader's
     /// remarks for the user (conversions, units, which volume was taken).
     pub fn read_known_with(path: &Path, opts: &formats::Options) -> Result<Option<(Self, Vec<String>)>> {
-        match path.extension().and_then(|e| e.to_str()) {
+        match formats::extension(path).as_deref() {
             Some("den") => {
-                let v = Input::open_plain(path)
+                let v = Input::open(path)
                     .and_then(|mut input| Self::read_den(&mut input, opts.max_bytes))
                     .with_context(|| format!("cannot load {}", path.display()))?;
                 Ok(Some((v, Vec::new())))
@@ -295,9 +334,13 @@ impl LoadedVolume {
         bytes: &[u8],
         opts: &formats::Options,
     ) -> Result<Option<(Self, Vec<String>)>> {
-        if Path::new(name).extension().and_then(|e| e.to_str()) == Some("den") {
-            let v = Self::read_den(&mut Input::from_slice(bytes), opts.max_bytes)
-                .with_context(|| format!("cannot load {name}"))?;
+        if formats::extension(Path::new(name)).as_deref() == Some("den") {
+            let mut input = Input::from_slice(bytes);
+            if formats::is_gzip(bytes) {
+                input = input.gunzip_rest();
+            }
+            let v =
+                Self::read_den(&mut input, opts.max_bytes).with_context(|| format!("cannot load {name}"))?;
             return Ok(Some((v, Vec::new())));
         }
         Ok(formats::read_bytes(name, bytes, opts)?.map(|l| (l.volume, l.notes)))

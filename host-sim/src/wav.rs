@@ -6,15 +6,17 @@
 //!
 //! - [`WavChannels::Stereo`]: left = X, right = Y. With no Z input the scope
 //!   shows the blanked jumps as faint lines (the scheduler keeps them short).
-//! - [`WavChannels::WithBeam`]: a third channel carries the beam, **on =
-//!   +1.0 (full scale), off = -1.0**: the largest swing, which a Z-input
-//!   driver or a comparator can threshold at 0 V whatever the card's output
-//!   level. Many scopes blank on a *positive* Z voltage (most Tektronix
-//!   models: +5 V blanks) and others on a negative one; set
-//!   [`WavConfig::invert_beam`] for the first kind (on = -1.0, off = +1.0).
-//!   Play three channels on an interface with three or more DC-coupled
-//!   outputs (the file's channel mask says front left, front right, front
-//!   centre).
+//! - [`WavChannels::WithBeam`]: a third channel carries the beam, **off
+//!   (blanked) = +1.0 (full scale), on = -1.0**: the largest swing, which a
+//!   Z-input driver or a comparator can threshold at 0 V whatever the
+//!   card's output level. Z high is blanked, as on the firmware's blank pin
+//!   (PB0) and the MCP4922 driver's Z pin: most scopes blank on a
+//!   *positive* Z voltage (most Tektronix models: +5 V blanks). Set
+//!   [`WavConfig::blank_active_low`] for one that blanks on a negative
+//!   voltage (off = -1.0, on = +1.0), as the firmware's feature
+//!   `blank-active-low` does. Play three channels on an interface with
+//!   three or more DC-coupled outputs (the file's channel mask says front
+//!   left, front right, front centre).
 //!
 //! Stereo 16-bit files have the classic PCM header (format tag 1); float
 //! and three-channel files are `WAVE_FORMAT_EXTENSIBLE` (tag `0xFFFE`, PCM
@@ -100,8 +102,8 @@ pub enum WavChannels {
     /// Left = X, right = Y (the default: every sound card has two outputs).
     #[default]
     Stereo,
-    /// X, Y, and the beam (on = +1.0, off = -1.0; see
-    /// [`WavConfig::invert_beam`]).
+    /// X, Y, and the beam (blanked = +1.0, lit = -1.0; see
+    /// [`WavConfig::blank_active_low`]).
     WithBeam,
 }
 
@@ -141,9 +143,9 @@ pub struct WavConfig {
     /// DAC resolution the samples' codes are in, `1 ..= 16` (the beam's
     /// [`BeamConfig::bits`]).
     pub bits: u8,
-    /// Beam channel on = -1.0, off = +1.0 (for a Z input that blanks on a
-    /// positive voltage).
-    pub invert_beam: bool,
+    /// Beam channel blanked = -1.0, lit = +1.0 (for a Z input that blanks
+    /// on a negative voltage; the default blanks on a positive one).
+    pub blank_active_low: bool,
     /// Round the length up to a whole number of frames.
     pub whole_loops: bool,
 }
@@ -151,7 +153,7 @@ pub struct WavConfig {
 impl Default for WavConfig {
     /// 48 kHz (every sound card has it), stereo, 16-bit PCM, 5 seconds (long
     /// enough to set up a scope while a player loops the file), 12 bits (the
-    /// scheduler's default DAC), beam not inverted, exact length.
+    /// scheduler's default DAC), beam channel blanked high, exact length.
     fn default() -> Self {
         Self {
             rate_hz: 48_000,
@@ -159,7 +161,7 @@ impl Default for WavConfig {
             format: WavFormat::Pcm16,
             seconds: 5.0,
             bits: 12,
-            invert_beam: false,
+            blank_active_low: false,
             whole_loops: false,
         }
     }
@@ -223,10 +225,12 @@ impl fmt::Display for WavError {
 }
 
 impl std::error::Error for WavError {
+    /// The cause's own cause: its message is in this one's already (an
+    /// error chain printed whole would say it twice).
     fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
         match self {
-            WavError::Io(e) => Some(e),
-            WavError::Wav(e) => Some(e),
+            WavError::Io(e) => e.source(),
+            WavError::Wav(e) => e.source(),
             _ => None,
         }
     }
@@ -301,8 +305,11 @@ pub fn unit_to_pcm16(v: f64) -> i16 {
 }
 
 /// Check `cfg` and work out the length in sample frames for a frame of
-/// `frame_samples` samples.
-fn sample_frames(cfg: &WavConfig, frame_samples: usize) -> Result<u64, WavError> {
+/// `frame_samples` samples: what [`write_wav`] writes.
+///
+/// # Errors
+/// As [`write_wav`], for the configuration.
+pub fn sample_frames(cfg: &WavConfig, frame_samples: usize) -> Result<u64, WavError> {
     if cfg.rate_hz == 0 {
         return Err(WavError::ZeroRate);
     }
@@ -345,10 +352,25 @@ fn sample_frames(cfg: &WavConfig, frame_samples: usize) -> Result<u64, WavError>
 /// finite or under one sample frame, `bits` not in `1 ..= 16`, a file over
 /// 4 GiB, or the writer's error.
 pub fn write_wav<W: Write + Seek>(out: W, frame: &[Sample], cfg: &WavConfig) -> Result<WavStats, WavError> {
+    write_wav_counted(out, frame, cfg, None)
+}
+
+/// [`write_wav`], counting the sample frames written in `progress` (its
+/// total [`WavStats::sample_frames`]).
+///
+/// # Errors
+/// As [`write_wav`].
+pub fn write_wav_counted<W: Write + Seek>(
+    out: W,
+    frame: &[Sample],
+    cfg: &WavConfig,
+    progress: Option<&crate::progress::Progress>,
+) -> Result<WavStats, WavError> {
     let total = sample_frames(cfg, frame.len())?;
     let max = u16::MAX >> (16 - cfg.bits);
     let clipped = frame.iter().filter(|s| s.x > max || s.y > max).count();
-    let beam = |b: Beam| if (b == Beam::On) != cfg.invert_beam { 1.0 } else { -1.0 };
+    // Blanked is high unless the Z input blanks low.
+    let beam = |b: Beam| if (b == Beam::Off) != cfg.blank_active_low { 1.0 } else { -1.0 };
     // The frame's values, once: then the loop only copies.
     let with_beam = cfg.channels == WavChannels::WithBeam;
     let values: Vec<f64> = frame
@@ -376,6 +398,11 @@ pub fn write_wav<W: Write + Seek>(out: W, frame: &[Sample], cfg: &WavConfig) -> 
     let repeats = total / frame.len() as u64;
     let rest = (total % frame.len() as u64) as usize * channels;
     let pieces = |all: usize| (0..repeats).map(move |_| all).chain([rest]);
+    let written = |len: usize| {
+        if let Some(p) = progress {
+            p.add(len / channels);
+        }
+    };
     match cfg.format {
         WavFormat::Pcm16 => {
             let pcm: Vec<i16> = values.iter().map(|&v| unit_to_pcm16(v)).collect();
@@ -388,6 +415,7 @@ pub fn write_wav<W: Write + Seek>(out: W, frame: &[Sample], cfg: &WavConfig) -> 
                     }
                     w.flush()?;
                 }
+                written(len);
             }
         }
         WavFormat::Float32 => {
@@ -396,6 +424,7 @@ pub fn write_wav<W: Write + Seek>(out: W, frame: &[Sample], cfg: &WavConfig) -> 
                 for &v in &float[..len] {
                     writer.write_sample(v)?;
                 }
+                written(len);
             }
         }
     }
@@ -418,11 +447,24 @@ pub fn write_wav<W: Write + Seek>(out: W, frame: &[Sample], cfg: &WavConfig) -> 
 /// As [`write_wav`] (the configuration is checked before the file is
 /// created), or the file cannot be created or written; the path named.
 pub fn write_wav_file(path: impl AsRef<Path>, frame: &[Sample], cfg: &WavConfig) -> anyhow::Result<WavStats> {
+    write_wav_file_counted(path, frame, cfg, None)
+}
+
+/// [`write_wav_file`], with progress as [`write_wav_counted`] counts it.
+///
+/// # Errors
+/// As [`write_wav_file`].
+pub fn write_wav_file_counted(
+    path: impl AsRef<Path>,
+    frame: &[Sample],
+    cfg: &WavConfig,
+    progress: Option<&crate::progress::Progress>,
+) -> anyhow::Result<WavStats> {
     use anyhow::Context as _;
     let path = path.as_ref();
     sample_frames(cfg, frame.len())?;
     crate::outfile::write_whole(path, |w| {
-        write_wav(w, frame, cfg).with_context(|| format!("cannot write {}", path.display()))
+        write_wav_counted(w, frame, cfg, progress).with_context(|| format!("cannot write {}", path.display()))
     })
 }
 
@@ -576,17 +618,18 @@ mod tests {
             WavConfig { channels: WavChannels::WithBeam, rate_hz: 3, seconds: 1.0, ..WavConfig::default() };
         let (_, v) = read_i16(&wav(&frame, &cfg).0);
         assert_eq!(v.len(), 9);
+        // Blanked high: on, off, on is low, high, low.
         let beam: Vec<i16> = v.chunks(3).map(|c| c[2]).collect();
-        assert_eq!(beam, [32767, -32767, 32767]);
+        assert_eq!(beam, [-32767, 32767, -32767]);
         let xs: Vec<i16> = v.chunks(3).map(|c| c[0]).collect();
         assert_eq!(xs, [10, 30, 50].map(|c| unit_to_pcm16(code_to_unit(c, 12))));
-        let inverted = WavConfig { invert_beam: true, ..cfg };
-        let (_, v) = read_i16(&wav(&frame, &inverted).0);
-        assert_eq!(v.chunks(3).map(|c| c[2]).collect::<Vec<_>>(), [-32767, 32767, -32767]);
+        let low = WavConfig { blank_active_low: true, ..cfg };
+        let (_, v) = read_i16(&wav(&frame, &low).0);
+        assert_eq!(v.chunks(3).map(|c| c[2]).collect::<Vec<_>>(), [32767, -32767, 32767]);
         let float = WavConfig { format: WavFormat::Float32, ..cfg };
         let (spec, v) = read_f32(&wav(&frame, &float).0);
         assert_eq!(spec.channels, 3);
-        assert_eq!(v.chunks(3).map(|c| c[2]).collect::<Vec<_>>(), [1.0, -1.0, 1.0]);
+        assert_eq!(v.chunks(3).map(|c| c[2]).collect::<Vec<_>>(), [-1.0, 1.0, -1.0]);
     }
 
     #[test]
@@ -699,7 +742,7 @@ mod tests {
         assert_eq!(v.len(), 36_000);
         for (i, c) in v.chunks(3).enumerate() {
             let code = |u: f32| ((f64::from(u) + 1.0) * 4095.0 / 2.0).round() as u16;
-            let beam = if c[2] > 0.0 { ON } else { OFF };
+            let beam = if c[2] > 0.0 { OFF } else { ON };
             assert_eq!(s(code(c[0]), code(c[1]), beam), frame[i % frame.len()], "sample frame {i}");
         }
         // And 16-bit PCM holds 12-bit codes exactly too.

@@ -1116,3 +1116,420 @@ fn the_manual_page_is_one_roff_page_with_every_subcommand() {
     assert!(out.stdout.is_empty(), "{}", text(&out.stdout));
     assert_eq!(std::fs::read_to_string(&file).unwrap(), page);
 }
+
+// --- Telling the truth (issue 19) -------------------------------------------
+
+/// Standard error, its lines without the `isoscope-sim: ` prefix.
+fn said(out: &Output) -> String {
+    text(&out.stderr)
+}
+
+/// The subcommands that take a volume file (`[INPUT]`).
+const INPUT_COMMANDS: [&str; 6] = ["contour", "stats", "info", "wav", "render", "send"];
+
+/// A file that no format's name or first bytes tell is refused by naming
+/// the formats that load (not by asking for a raw file's --dims), and a
+/// file that is not there by saying so; the help names every format and
+/// every name ending that loads.
+#[test]
+fn an_unknown_format_is_refused_by_naming_the_formats_that_load() {
+    use isoscope_sim::formats::Format;
+    let dir = TempDir::new("unknown-format");
+    let odd = dir.file("notes.xyz", b"hello, this is not a volume\n");
+    for cmd in INPUT_COMMANDS {
+        let mut args = vec![cmd, odd.as_str()];
+        if cmd == "send" {
+            args.extend(["--port", "tcp:127.0.0.1:1"]);
+        }
+        let out = run(&args);
+        let err = said(&out);
+        assert_eq!(out.status.code(), Some(1), "{cmd}: {err}");
+        assert!(
+            err.starts_with(&format!("isoscope-sim: error: {odd}: neither its name nor")),
+            "{cmd}: {err}"
+        );
+        for f in Format::ALL {
+            assert!(err.contains(f.name()), "{cmd}: {} is not named: {err}", f.name());
+            for e in f.extensions() {
+                assert!(err.contains(&format!(".{e}")), "{cmd}: .{e} is not named: {err}");
+            }
+        }
+        assert!(err.contains(".den") && err.contains(".gz"), "{cmd}: {err}");
+        assert!(err.contains("--dims NXxNYxNZ") && err.contains("--dtype"), "{cmd}: {err}");
+        assert_eq!(err.lines().count(), 1, "{cmd}: {err}");
+    }
+    let gone = path_str(&dir.0.join("gone.xyz"));
+    let err = said(&run(&["info", &gone]));
+    assert!(err.starts_with(&format!("isoscope-sim: error: cannot read {gone}: ")), "{err}");
+    // The help, wrapped or not, names every format and ending.
+    let flat = |args: &[&str]| text(&run(args).stdout).split_whitespace().collect::<Vec<_>>().join(" ");
+    let mut helps = vec![("isoscope-sim --help".to_owned(), flat(&["--help"]))];
+    helps.extend(INPUT_COMMANDS.map(|c| (format!("{c} --help"), flat(&[c, "--help"]))));
+    for (what, help) in &helps {
+        for f in Format::ALL {
+            assert!(help.contains(f.name()), "{what} does not name {}", f.name());
+            for e in f.extensions() {
+                assert!(help.contains(&format!(".{e}")), "{what} does not name .{e}");
+            }
+        }
+        assert!(help.contains("VolPack (.den)") && help.contains(".gz"), "{what}: {help}");
+    }
+}
+
+/// A VolPack `.den` file loads gzipped (`.den.gz`, any case), as the help
+/// says every format does: the same volume as the plain file.
+#[test]
+fn a_gzipped_den_file_loads_like_the_plain_one() {
+    use std::io::Write as _;
+    // The 62-byte header, big-endian: version 1, then map_len (shorts 25
+    // to 27) 3x2x2 and the sample count; then the samples.
+    let mut den = vec![0u8; 62];
+    den[1] = 1;
+    for (i, n) in [3u16, 2, 2].into_iter().enumerate() {
+        den[50 + 2 * i..52 + 2 * i].copy_from_slice(&n.to_be_bytes());
+    }
+    den[58..62].copy_from_slice(&12i32.to_be_bytes());
+    den.extend([0u8, 10, 200, 30, 40, 250, 60, 70, 80, 90, 100, 110]);
+    let mut z = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    z.write_all(&den).unwrap();
+    let gz = z.finish().unwrap();
+    let dir = TempDir::new("den-gz");
+    let plain = run(&["info", &dir.file("head.den", &den)]);
+    assert!(plain.status.success(), "{}", said(&plain));
+    assert!(text(&plain.stdout).starts_with("dims=3x2x2\ndtype=u8\n"), "{}", text(&plain.stdout));
+    for name in ["head.den.gz", "HEAD.DEN.GZ"] {
+        let out = run(&["info", &dir.file(name, &gz)]);
+        assert!(out.status.success(), "{name}: {}", said(&out));
+        assert_eq!(text(&out.stdout), text(&plain.stdout), "{name}");
+    }
+}
+
+/// A file that cannot be written is one plain error line that says why
+/// once: not the system's message twice, nor the temporary file's name.
+#[test]
+fn a_write_error_says_its_cause_once() {
+    let dir = TempDir::new("write-error");
+    let missing = dir.0.join("no-such-dir");
+    let cases: [(&str, &[&str]); 7] = [
+        ("x.png", &["render", "--demo", "sphere:8", "--size", "32", "-o", "OUT"]),
+        (
+            "x.gif",
+            &["render", "--demo", "sphere:8", "--size", "32", "--anim-frames", "2", "--animate", "OUT"],
+        ),
+        ("x.wav", &["wav", "--demo", "sphere:8", "--seconds", "0.01", "-o", "OUT"]),
+        ("x.csv", &["contour", "--demo", "sphere:8", "-o", "OUT"]),
+        ("x.svg", &["contour", "--demo", "sphere:8", "--format", "svg", "-o", "OUT"]),
+        ("x.txt", &["stats", "--demo", "sphere:8", "--samples", "OUT"]),
+        ("x.1", &["manpage", "-o", "OUT"]),
+    ];
+    for (name, args) in cases {
+        let path = path_str(&missing.join(name));
+        let cause = std::fs::File::create(&path).unwrap_err().to_string();
+        let args: Vec<&str> = args.iter().map(|a| if *a == "OUT" { path.as_str() } else { a }).collect();
+        let out = run(&args);
+        assert_eq!(out.status.code(), Some(1), "{args:?}");
+        let err = said(&out);
+        let last = err.lines().last().unwrap_or_default();
+        assert_eq!(last, format!("isoscope-sim: error: cannot create {path}: {cause}"), "{args:?}: {err}");
+    }
+    // A full disk, where there is one to try.
+    if std::path::Path::new("/dev/full").exists() {
+        let cause = {
+            use std::io::Write as _;
+            let mut full = std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
+            full.write_all(&[0; 1 << 16]).and_then(|()| full.flush()).unwrap_err().to_string()
+        };
+        for args in [
+            &["render", "--demo", "sphere:8", "--size", "32", "-o", "/dev/full"][..],
+            &["wav", "--demo", "sphere:8", "--seconds", "0.01", "-o", "/dev/full"],
+            &["contour", "--demo", "sphere:8", "-o", "/dev/full"],
+        ] {
+            let out = run(args);
+            let err = said(&out);
+            let last = err.lines().last().unwrap_or_default();
+            assert_eq!(
+                last,
+                format!("isoscope-sim: error: cannot write /dev/full: {cause}"),
+                "{args:?}: {err}"
+            );
+        }
+    }
+}
+
+/// A picture with nothing drawn says so, on every command that makes one
+/// (and `contour`'s export): the volume's values and the levels `info`
+/// suggests, and no false note that there was no room to order it.
+#[test]
+fn an_empty_picture_says_why_and_what_to_draw() {
+    // The bins whose first suggestion a file is drawn at without --level.
+    let bins = isoscope_sim::info::LEVEL_BINS.to_string();
+    let info = text(&run(&["info", "--demo", "hydrogen:16", "--bins", &bins]).stdout);
+    let field =
+        |k: &str| info.lines().find_map(|l| l.strip_prefix(k)).unwrap_or_else(|| panic!("{k}: {info}"));
+    let (min, max, suggested) = (field("min="), field("max="), field("suggested_levels="));
+    let first = suggested.split(',').next().unwrap();
+    let dir = TempDir::new("empty");
+    let file = |name: &str| path_str(&dir.0.join(name));
+    let (png, gif, wav) = (file("e.png"), file("e.gif"), file("e.wav"));
+    for (what, args) in [
+        ("picture", vec!["render", "--size", "32", "-o", &png]),
+        ("picture", vec!["render", "--size", "32", "--anim-frames", "2", "--animate", &gif]),
+        ("picture", vec!["stats"]),
+        ("picture", vec!["wav", "--seconds", "0.01", "-o", &wav]),
+        ("picture", vec!["contour", "--format", "svg"]),
+        ("export", vec!["contour"]),
+    ] {
+        let mut all = args.clone();
+        all.extend(["--demo", "hydrogen:16", "--level", "5"]);
+        let err = said(&run(&all));
+        let want = format!(
+            "isoscope-sim: warning: the {what} is empty: level 5 is outside the volume's values, {min} to {max}; \
+             try --level {first} (suggested levels {}, see `info`)\n",
+            suggested.replace(',', ", ")
+        );
+        assert!(err.contains(&want), "{args:?}: {err}");
+        assert!(!err.contains("no room"), "{args:?}: {err}");
+    }
+    // A level within the values that meets no slice says so.
+    let err =
+        said(&run(&["stats", "--demo", "hydrogen:16", "--level", "0.5", "--axes", "xy", "--every", "20"]));
+    assert!(
+        err.contains(&format!(
+            "no contour at level 0.5 on these slices; the volume's values run from {min} to {max}"
+        )),
+        "{err}"
+    );
+    // A picture with something in it says nothing of the kind.
+    let err = said(&run(&["stats", "--demo", "hydrogen:16"]));
+    assert!(!err.contains("empty"), "{err}");
+}
+
+/// A frame that refreshes below 25 times a second is said to flicker, at
+/// the rate it plays (a WAV file's audio rate, the DAC's for the others),
+/// with the ways to shorten it that apply; a steady one is not.
+#[test]
+fn a_flickering_picture_is_said_to_flicker() {
+    let dir = TempDir::new("flicker");
+    let (wav, png) = (path_str(&dir.0.join("f.wav")), path_str(&dir.0.join("f.png")));
+    // hydrogen:24 at 48 kHz: about 10 frames/s; every 3rd slice is above 25.
+    let base = ["--demo", "hydrogen:24"];
+    for args in [
+        vec!["wav", "--seconds", "0.01", "-o", &wav],
+        vec!["render", "--size", "32", "--rate", "40000", "-o", &png],
+        vec!["stats", "--rate", "40000"],
+    ] {
+        let all: Vec<&str> = args.iter().copied().chain(base).collect();
+        let out = run(&all);
+        assert!(out.status.success(), "{all:?}: {}", said(&out));
+        let err = said(&out);
+        let line = err.lines().find(|l| l.contains("flickers")).unwrap_or_else(|| panic!("{all:?}: {err}"));
+        assert!(line.starts_with("isoscope-sim: warning: the picture flickers: one frame is "), "{line}");
+        let rate = if args[0] == "wav" { "48000" } else { "40000" };
+        assert!(line.contains(&format!(" frames/s at {rate} samples/s (below 25 ")), "{line}");
+        assert!(line.contains("draw fewer slices (--every ") && line.contains("--downsample 2"), "{line}");
+        // One level: fewer levels is no way; three planes: fewer is.
+        assert!(!line.contains("levels") && line.contains("fewer planes (--axes)"), "{line}");
+        let every: usize = line.split("--every ").nth(1).unwrap().split(')').next().unwrap().parse().unwrap();
+        // The stride it names does make the picture steady.
+        let mut again = all.clone();
+        let every = every.to_string();
+        again.extend(["--every", &every]);
+        let err = said(&run(&again));
+        assert!(!err.contains("flickers"), "{again:?}: {err}");
+    }
+    // One plane and two levels: the advice follows the options.
+    let err = said(&run(&[
+        "stats",
+        "--demo",
+        "hydrogen:24",
+        "--rate",
+        "20000",
+        "--axes",
+        "xy",
+        "--level",
+        "0.1",
+        "--level",
+        "0.2",
+    ]));
+    assert!(err.contains("fewer levels (of these 2)") && !err.contains("--axes"), "{err}");
+    // At 1 MS/s the demo is steady.
+    assert!(!said(&run(&["stats", "--demo", "hydrogen:24"])).contains("flickers"));
+}
+
+/// Run `isoscope-sim` with standard error on a terminal (a
+/// pseudo-terminal): what it wrote there, once it has exited.
+#[cfg(unix)]
+fn run_on_a_terminal(args: &[&str]) -> String {
+    use std::io::Read as _;
+    let pty = isoscope_sim::tty::open_pty().expect("no pseudo-terminal");
+    let slave = std::fs::File::from(pty.slave.try_clone().unwrap());
+    let mut child = Command::new(env!("CARGO_BIN_EXE_isoscope-sim"))
+        .args(args)
+        .stdout(std::process::Stdio::null())
+        .stderr(slave)
+        .spawn()
+        .unwrap();
+    let (mut master, mut seen, mut buf) = (&pty.master, Vec::new(), [0u8; 4096]);
+    let mut drain = |seen: &mut Vec<u8>| {
+        while let Ok(n @ 1..) = master.read(&mut buf) {
+            seen.extend_from_slice(&buf[..n]);
+        }
+    };
+    let status = loop {
+        drain(&mut seen);
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    drain(&mut seen);
+    let seen = String::from_utf8_lossy(&seen).into_owned();
+    assert!(status.success(), "{args:?}: {seen}");
+    seen
+}
+
+/// The progress lines a terminal was shown: `(label, done, total)`, the
+/// last of each redraw.
+#[cfg(unix)]
+fn progress_lines(seen: &str) -> Vec<(String, u64, u64)> {
+    seen.split(['\r', '\n'])
+        .filter_map(|l| {
+            let (label, rest) = l.rsplit_once(": ")?;
+            let (count, pct) = rest.split_once(" (")?;
+            let (done, total) = count.split_once('/')?;
+            pct.strip_suffix("%)")?;
+            Some((label.to_owned(), done.parse().ok()?, total.parse().ok()?))
+        })
+        .collect()
+}
+
+/// On a terminal, `wav` shows its progress as the other commands do (the
+/// contouring, then the writing), and no progress line passes its total:
+/// `render` of a surface that outgrows the host's first memory counted to
+/// 200% when its second pass added to the first.
+#[cfg(unix)]
+#[test]
+fn progress_is_shown_for_wav_and_never_passes_its_total() {
+    let dir = TempDir::new("progress");
+    let (wav, png) = (path_str(&dir.0.join("p.wav")), path_str(&dir.0.join("p.png")));
+    let seen = run_on_a_terminal(&["wav", "--demo", "hydrogen:16", "--seconds", "0.5", "-o", &wav]);
+    let lines = progress_lines(&seen);
+    for label in ["contouring (frames fed to the board)", "writing audio (sample frames)"] {
+        let last = lines.iter().rfind(|(l, ..)| l == label).unwrap_or_else(|| panic!("no {label}: {seen:?}"));
+        assert_eq!(last.1, last.2, "{label} did not finish: {seen:?}");
+    }
+    assert!(lines.iter().any(|(_, done, total)| (done, total) == (&24_000, &24_000)), "{seen:?}");
+    // gyroid:32 outgrows the host's first 65,536 points.
+    let seen = run_on_a_terminal(&["render", "--demo", "gyroid:32", "--size", "32", "-o", &png]);
+    let lines = progress_lines(&seen);
+    assert!(lines.iter().any(|(l, ..)| l.starts_with("contouring")), "{seen:?}");
+    for (label, done, total) in &lines {
+        assert!(done <= total, "{label}: {done}/{total}: {seen:?}");
+    }
+}
+
+/// An output whose name says another format than the one written is
+/// warned of (and written all the same: its content is what the command
+/// makes); a name that agrees, in any case, or has no extension is not.
+#[test]
+fn an_output_named_for_another_format_is_warned_of() {
+    let dir = TempDir::new("misnamed");
+    let file = |name: &str| path_str(&dir.0.join(name));
+    for (name, format, usual, args) in [
+        ("x.jpg", "a PNG", "png", vec!["render", "--demo", "sphere:8", "--size", "32", "-o"]),
+        ("x.mp3", "a WAV file", "wav", vec!["wav", "--demo", "sphere:8", "--seconds", "0.01", "-o"]),
+        ("x.csv", "SVG", "svg", vec!["contour", "--demo", "sphere:8", "--format", "svg", "-o"]),
+        ("x.svg", "CSV", "csv", vec!["contour", "--demo", "sphere:8", "-o"]),
+    ] {
+        let path = file(name);
+        let ext = name.rsplit('.').next().unwrap();
+        let mut all = args.clone();
+        all.push(&path);
+        let out = run(&all);
+        assert!(out.status.success(), "{all:?}: {}", said(&out));
+        let want = format!(
+            "isoscope-sim: warning: {path}: written as {format}, whatever its .{ext} says; name it .{usual}\n"
+        );
+        assert!(said(&out).starts_with(&want), "{all:?}: {}", said(&out));
+        assert!(std::fs::metadata(&path).unwrap().len() > 0);
+        // Named for what it is (in any case), or not named for anything: no warning.
+        for good in [format!("y.{usual}"), format!("Z.{}", usual.to_uppercase()), "plain".to_owned()] {
+            let path = file(&good);
+            let mut all = args.clone();
+            all.push(&path);
+            let err = said(&run(&all));
+            assert!(!err.contains("whatever its"), "{all:?}: {err}");
+        }
+    }
+    assert!(std::fs::read(file("x.jpg")).unwrap().starts_with(b"\x89PNG"));
+}
+
+/// The README's sentence on its main job says the size that command
+/// writes (render's default `--size`) and the size of the picture shown
+/// above it (`docs/img/hydrogen.png`), which differ.
+#[test]
+fn the_readme_says_the_main_jobs_picture_size() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+    let flat = readme.split_whitespace().collect::<Vec<_>>().join(" ");
+    let start = flat.find("The first command").expect("no sentence on the main job");
+    let sentence = &flat[start..start + flat[start..].find(". ").unwrap_or(flat.len() - start)];
+    let help = text(&run(&["render", "--help"]).stdout);
+    let size: u32 = help
+        .split("--size <SIZE>")
+        .nth(1)
+        .and_then(|h| h.split("[default: ").nth(1))
+        .and_then(|d| d.split(']').next())
+        .and_then(|d| d.parse().ok())
+        .unwrap_or_else(|| panic!("no default --size in:\n{help}"));
+    let png = std::fs::read(root.join("docs/img/hydrogen.png")).unwrap();
+    let shown = u32::from_be_bytes(png[16..20].try_into().unwrap());
+    assert!(sentence.contains(&format!("{size}x{size}")), "the default {size} is not said: {sentence}");
+    assert!(sentence.contains(&format!("{shown}x{shown}")), "the picture's {shown} is not said: {sentence}");
+    assert!(sentence.contains(&format!("--size {shown}")), "{sentence}");
+}
+
+/// `wav --beam-channel` blanks high, as the firmware's blank pin (PB0)
+/// does by default: +1 while the beam is off, -1 while it draws; and
+/// `--blank-active-low` turns it over, as the firmware's feature of that
+/// name does. The old `--invert-beam` is gone, not quietly the default.
+#[test]
+fn the_beam_channel_blanks_high_as_the_firmware_does() {
+    let dir = TempDir::new("beam-channel");
+    let (wav, samples) = (path_str(&dir.0.join("z.wav")), path_str(&dir.0.join("z.txt")));
+    let base = [
+        "wav",
+        "--demo",
+        "sphere:8",
+        "--seconds",
+        "0.05",
+        "--beam-channel",
+        "-o",
+        &wav,
+        "--samples",
+        &samples,
+    ];
+    for (extra, blanked) in [(None, 32767i16), (Some("--blank-active-low"), -32767)] {
+        let args: Vec<&str> = base.iter().copied().chain(extra).collect();
+        let out = run(&args);
+        assert!(out.status.success(), "{args:?}: {}", said(&out));
+        let lit: Vec<bool> = std::fs::read_to_string(&samples)
+            .unwrap()
+            .lines()
+            .map(|l| l.split(' ').nth(2) == Some("1"))
+            .collect();
+        assert!(lit.contains(&true) && lit.contains(&false));
+        let mut r = hound::WavReader::open(&wav).unwrap();
+        assert_eq!(r.spec().channels, 3);
+        let z: Vec<i16> = r.samples::<i16>().map(Result::unwrap).skip(2).step_by(3).collect();
+        for (i, (&z, &lit)) in z.iter().zip(lit.iter().cycle()).enumerate() {
+            assert_eq!(z, if lit { -blanked } else { blanked }, "{extra:?}: sample frame {i}");
+        }
+    }
+    for args in [
+        &["wav", "--demo", "sphere:8", "--beam-channel", "--invert-beam", "-o", &wav][..],
+        &["wav", "--demo", "sphere:8", "--blank-active-low", "-o", &wav],
+    ] {
+        assert_eq!(run(args).status.code(), Some(2), "{args:?}");
+    }
+}

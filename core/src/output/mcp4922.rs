@@ -35,8 +35,10 @@
 //! `VREF/2` from a buffered divider. Code 2048 is then the screen centre
 //! and codes 0 and 4095 are -5 V and +5 V on the scope's X and Y inputs
 //! (set to DC coupling, XY mode). The Z pin drives the scope's Z input
-//! (or a blanking circuit) through a resistor; many scopes blank on a
-//! *high* Z input: use [`ZPolarity::ActiveLow`] for those.
+//! (or a blanking circuit) through a resistor. By default it is high while
+//! the beam is blanked, as the firmware's blank pin is (most Z inputs,
+//! Tektronix's among them, blank on a positive voltage): use
+//! [`ZPolarity::BlankActiveLow`] for a Z input that blanks on a low one.
 //!
 //! # Commands
 //!
@@ -173,31 +175,36 @@ pub enum VrefBuffer {
     Buffered,
 }
 
-/// Which level of the Z pin lights the beam.
+/// Which level of the Z pin blanks the beam: named as the firmware's
+/// blank pin (`BLANK_ACTIVE_HIGH`, feature `blank-active-low`) and `wav
+/// --blank-active-low` are.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ZPolarity {
-    /// High lights the beam, low blanks it.
+    /// High blanks the beam, low lights it (most Z inputs: they blank on a
+    /// positive voltage).
     #[default]
-    ActiveHigh,
-    /// Low lights the beam, high blanks it (scopes whose Z input blanks on
-    /// a positive voltage).
-    ActiveLow,
+    BlankActiveHigh,
+    /// Low blanks the beam, high lights it.
+    BlankActiveLow,
 }
 
 impl ZPolarity {
     /// Whether the Z pin is high for `beam`.
     const fn is_high(self, beam: Beam) -> bool {
-        matches!((self, beam), (ZPolarity::ActiveHigh, Beam::On) | (ZPolarity::ActiveLow, Beam::Off))
+        matches!(
+            (self, beam),
+            (ZPolarity::BlankActiveHigh, Beam::Off) | (ZPolarity::BlankActiveLow, Beam::On)
+        )
     }
 }
 
 /// Settings of an [`Mcp4922`]. The default is unbuffered VREF, gain 1x and
-/// an active-high Z pin.
+/// a Z pin that is high while the beam is blanked.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Config {
-    /// Which Z level lights the beam.
+    /// Which Z level blanks the beam.
     pub z_polarity: ZPolarity,
     /// Output gain of both channels.
     pub gain: Gain,
@@ -208,7 +215,7 @@ pub struct Config {
 impl Config {
     /// The default settings, usable in a `const`.
     pub const fn new() -> Self {
-        Self { z_polarity: ZPolarity::ActiveHigh, gain: Gain::X1, vref_buffer: VrefBuffer::Unbuffered }
+        Self { z_polarity: ZPolarity::BlankActiveHigh, gain: Gain::X1, vref_buffer: VrefBuffer::Unbuffered }
     }
 
     /// These settings with another Z polarity.

@@ -205,6 +205,8 @@ fn chain_on(
     let Some(mut x) = Index::build(src, scratch, any_vertex, hashed && pass == Pass::Stitch, width, poll)
     else {
         copy(src, dst, &mut stats);
+        // Nothing to stitch or order is in order (not "no room for it").
+        stats.ordered = src.len() == 0;
         return stats;
     };
     stats.fragments = x.frags as u32;

@@ -645,6 +645,22 @@ fn collinear_points_merge_within_tolerance_only() {
     assert_eq!((st.merged, st.points_out), (0, 4));
 }
 
+/// An empty surface is in order: there is nothing to stitch or order, so
+/// no note of "no room to order it" may follow from it.
+#[test]
+fn an_empty_surface_is_in_order() {
+    let mut p = store(16);
+    let mut src = Geometry::new(&mut p);
+    src.reset(8);
+    let mut p2 = store(16);
+    let mut dst = Geometry::new(&mut p2);
+    for pass in [Pass::Stitch, Pass::Order(Metric::Space)] {
+        let st = chain(Source::one(&src), &mut dst, &mut [0u8; 64], [0; 3], 0.0, pass);
+        assert!(st.ordered, "{pass:?}: {st:?}");
+        assert_eq!((st.points_out, dst.len()), (0, 0));
+    }
+}
+
 #[test]
 fn too_little_scratch_copies_in_order() {
     let mut p = store(16);

@@ -68,21 +68,23 @@ impl Format {
         }
     }
 
+    /// The file name endings it is known by (lower case, without the dot,
+    /// before any `.gz`), the usual ones first.
+    pub fn extensions(self) -> &'static [&'static str] {
+        match self {
+            Format::Nrrd => &["nrrd", "nhdr"],
+            Format::Nifti => &["nii", "hdr"],
+            Format::Mrc => &["mrc", "map", "ccp4", "mrcs", "rec"],
+            Format::Cube => &["cube", "cub"],
+            Format::Vtk => &["vtk"],
+        }
+    }
+
     /// The format a file name tells (case-insensitive; any of these may end
-    /// in `.gz`): `.nrrd`, `.nhdr`; `.nii`, `.hdr`; `.mrc`, `.mrcs`, `.map`,
-    /// `.ccp4`, `.rec`; `.cube`, `.cub`; `.vtk`.
+    /// in `.gz`): one of its [`Format::extensions`].
     pub fn from_name(path: &Path) -> Option<Format> {
-        let name = path.file_name()?.to_str()?.to_ascii_lowercase();
-        let name = name.strip_suffix(".gz").unwrap_or(&name);
-        let ext = name.rsplit_once('.')?.1;
-        Some(match ext {
-            "nrrd" | "nhdr" => Format::Nrrd,
-            "nii" | "hdr" => Format::Nifti,
-            "mrc" | "mrcs" | "map" | "ccp4" | "rec" => Format::Mrc,
-            "cube" | "cub" => Format::Cube,
-            "vtk" => Format::Vtk,
-            _ => return None,
-        })
+        let ext = extension(path)?;
+        Format::ALL.into_iter().find(|f| f.extensions().contains(&ext.as_str()))
     }
 
     /// The format the first bytes of a file show (gunzipped already), if
@@ -101,6 +103,14 @@ impl Format {
             None
         }
     }
+}
+
+/// A file name's extension, lower case, before any `.gz`: `nii` for
+/// `Head.NII.gz`.
+pub fn extension(path: &Path) -> Option<String> {
+    let name = path.file_name()?.to_str()?.to_ascii_lowercase();
+    let name = name.strip_suffix(".gz").unwrap_or(&name);
+    Some(name.rsplit_once('.')?.1.to_owned())
 }
 
 /// Default of [`Options::max_bytes`]: 2 GiB.
