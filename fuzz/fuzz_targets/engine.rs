@@ -2,6 +2,10 @@
 //! answer a valid frame, every sample in the DAC range, and afterwards a
 //! clean volume shows exactly the picture a fresh engine shows.
 //!
+//! The clean volume sets the view and beam first (the noise may have set
+//! them, validly: the order of the picture depends on them), and a fresh
+//! engine is sent the same bytes.
+//!
 //! Input: one configuration byte (the feed chunk size, 1..=64, and the clock
 //! step per chunk: 0, 2, 4 or 6 s, so that transfers time out), then the
 //! bytes on the line. An even chunk size runs the engine as the firmware
@@ -36,7 +40,19 @@ fn clean_volume() -> Vec<u8> {
         let mut buf = [0u8; 1100];
         out.extend_from_slice(encode(m, &mut buf).expect("encodes"));
     };
-    push(&Message::Hello { protocol: PROTOCOL_VERSION, firmware: [0, 0, 0], seq: 9 });
+    push(&Message::Hello { protocol: PROTOCOL_VERSION, firmware: [0, 0, 0], seq: 7 });
+    // The view and beam the noise may have set (validly) are set again:
+    // the picture's order depends on them.
+    let view = isoscope_core::view::View::DEFAULT;
+    push(&Message::SetView {
+        seq: 7,
+        yaw: view.yaw,
+        pitch: view.pitch,
+        roll: view.roll,
+        fov_deg: 0.0,
+        spin_deg_per_s: 0.0,
+    });
+    push(&Message::SetBeam { seq: 8, lit_step: 40, dwell_us: 2, settle_us: 40 });
     let (nx, ny, nz) = (4u16, 3u16, 3u16);
     push(&Message::BeginVolume {
         seq: 9,
