@@ -140,6 +140,41 @@ fn samples_narrow_only_when_every_value_fits() {
     assert_eq!(host.volume.samples, Samples::U16(vec![1; 4]));
 }
 
+/// `send` of `input` (send's arguments) to a virtual f407 board: its
+/// standard error and output, once the board has shown the volume.
+fn send_to_a_virtual_board(input: &[&std::ffi::OsStr]) -> (String, String) {
+    let mut board = Command::new(bin())
+        .args(["device", "--tcp", "127.0.0.1:0", "--board", "f407", "--baud", "0", "--exit-after", "1"])
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut log = BufReader::new(board.stdout.take().unwrap());
+    let mut addr = String::new();
+    log.read_line(&mut addr).unwrap();
+    std::thread::spawn(move || for _ in log.lines().map_while(Result::ok) {});
+    let out = Command::new(bin())
+        .arg("send")
+        .args(input)
+        .args(["--port", &format!("tcp:{}", addr.trim()), "--baud", "12000000"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    if !out.status.success() {
+        let _ = board.kill();
+    }
+    let status = board.wait().unwrap();
+    assert!(out.status.success(), "send failed: {err}");
+    assert!(status.success());
+    (err, String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
+/// The board's own report of the points it shows.
+fn board_points(text: &str) -> u64 {
+    text.lines()
+        .find_map(|l| l.strip_prefix("board_points=")?.parse().ok())
+        .unwrap_or_else(|| panic!("no board_points= in {text}"))
+}
+
 /// `send` of an MNI152-sized volume to a virtual f407 board: downsampled
 /// with a note (by 2 to fit its slices, by 3 for its picture: every 8th
 /// slice asked, every 16th drawn at 2, every 8th at 3), sent, and the
@@ -151,45 +186,35 @@ fn send_fits_an_mni152_sized_volume_to_the_virtual_board() {
     let raw = dir.join("mni.raw");
     let Samples::U8(bytes) = mni_like().samples else { unreachable!() };
     std::fs::write(&raw, &bytes).unwrap();
-    let samples = dir.join("board.txt");
-    let mut board = Command::new(bin())
-        .args(["device", "--tcp", "127.0.0.1:0", "--board", "f407", "--baud", "0", "--exit-after", "1"])
-        .arg("--samples")
-        .arg(&samples)
-        .stdout(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut log = BufReader::new(board.stdout.take().unwrap());
-    let mut addr = String::new();
-    log.read_line(&mut addr).unwrap();
-    std::thread::spawn(move || for _ in log.lines().map_while(Result::ok) {});
-    let out = Command::new(bin())
-        .arg("send")
-        .arg(&raw)
-        .args(["--dims", "197x233x189", "--dtype", "u8", "--level", "100", "--every", "8"])
-        .args(["--port", &format!("tcp:{}", addr.trim()), "--baud", "12000000"])
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    if !out.status.success() {
-        let _ = board.kill();
-    }
-    let status = board.wait().unwrap();
+    let args = ["--dims", "197x233x189", "--dtype", "u8", "--level", "100", "--every", "8"];
+    let mut input = vec![raw.as_os_str()];
+    input.extend(args.iter().map(std::ffi::OsStr::new));
+    let (err, text) = send_to_a_virtual_board(&input);
     let _ = std::fs::remove_dir_all(&dir);
-    assert!(out.status.success(), "send failed: {err}");
-    assert!(status.success());
     assert!(err.contains("isoscope-sim: note: the board (an f407 by its capabilities)"), "{err}");
     assert!(
         err.contains("draws every 16th slice of a 98x116x94 volume (slices 32 voxels apart), and every 8th slice once downsampled by 3 (24 voxels apart)")
             && err.contains("sent 65x77x63 U8"),
         "{err}"
     );
-    let text = String::from_utf8_lossy(&out.stdout);
-    let points: u64 = text
-        .lines()
-        .find_map(|l| l.strip_prefix("board_points=")?.parse().ok())
-        .unwrap_or_else(|| panic!("no board_points= in {text}"));
-    assert!(points > 100, "{text}");
+    assert!(board_points(&text) > 100, "{text}");
+}
+
+/// The real MNI152 template (scripts/fetch-data), sent as a newcomer
+/// sends it, with no option: oriented, fitted to the board's picture, and
+/// shown whole (every slice drawn).
+#[test]
+fn send_puts_the_real_mni152_template_on_the_virtual_board() {
+    let file = real_data("mni_icbm152_t1_tal_nlin_sym_09a_converted.nii.gz");
+    let (err, text) = send_to_a_virtual_board(&[file.as_os_str()]);
+    assert!(err.contains("downsampling by 9") && err.contains("sent 21x21x25 U8"), "{err}");
+    assert!(text.contains("board_state=Showing"), "{text}");
+    assert!(board_points(&text) > 1000, "{text}");
+    // What the board was told it would draw: every slice, nothing dropped.
+    let out = Command::new(bin()).arg("stats").arg(&file).args(["--board", "f407"]).output().unwrap();
+    let stats = String::from_utf8_lossy(&out.stdout);
+    assert!(stats.contains("\nevery=1\n") && stats.contains("pieces_dropped=0"), "{stats}");
+    assert!(stats.contains(&format!("points={}", board_points(&text))), "{stats}\n{text}");
 }
 
 /// ITK's 221x257 proton density slice is wider than the f407's rows: the
