@@ -10,7 +10,9 @@ install beyond the browser), and for each scene checks that
   `isoscope-sim render --samples` for the same scene, byte for byte;
 - the canvas equals `isoscope-sim render`'s PNG of that scene, and the
   first scene's also the golden tests/golden/hydrogen32.png, within the
-  tolerances below.
+  tolerances below;
+- a large volume loads in the page's worker: the page shows the work's
+  progress and its thread never stalls for long meanwhile.
 
 Standard library only. Usage: web_test.py SIM_BINARY [DATA_DIR]
 """
@@ -59,6 +61,12 @@ SCENES = [
 ]
 # A real volume, opened through the page's file input.
 FILE_SCENE = "brainsmall.den"
+# A large demo, picked from the page's list: seconds of work in the worker.
+LARGE_DEMO = "gyroid:128"
+# The longest the page's thread may go without running a 10 ms timer while
+# the large demo loads (about 2.4 s of work in the worker on this project's
+# machine; a page doing it on its own thread stalls that long).
+MAX_STALL_MS = 250
 
 
 def fail(msg):
@@ -258,6 +266,41 @@ def check_scene(b, name, got, sim_flags, sim, tmp, tag, golden=None):
         compare(name, canvas, read_png(golden), f"the golden {golden.name}", golden=True)
 
 
+def check_large(b, sim, tmp):
+    """Pick the large demo from the page's list: the page shows the work's
+    progress, its thread keeps running, and the frame is render's."""
+    b.eval("(() => { window.__stall = { max: 0, last: performance.now() }; setInterval(() => { "
+           "const now = performance.now(); window.__stall.max = Math.max(window.__stall.max, now - "
+           "window.__stall.last); window.__stall.last = now; }, 10); })()")
+    frames = b.eval("window.isoscope.frames")
+    t0 = time.monotonic()
+    b.eval(f"(() => {{ const s = document.getElementById('demo'); s.value = {json.dumps(LARGE_DEMO)}; "
+           "s.dispatchEvent(new Event('change')); })()")
+    shown, done = [], (f"(() => {{ const i = window.isoscope.info(); return window.isoscope.error !== null || "
+                       f"(i && i.name === {json.dumps(LARGE_DEMO)} && window.isoscope.frames > {frames} && "
+                       "!window.isoscope.pending()); })()")
+    while not b.eval(done):
+        label = b.eval("document.getElementById('busy').hidden ? null : "
+                       "document.getElementById('busy-label').textContent")
+        if label and label.split(" (")[0] not in shown:
+            shown.append(label.split(" (")[0])
+        if time.monotonic() - t0 > 120:
+            fail(f"{LARGE_DEMO} did not show within 120 s")
+        time.sleep(0.03)
+    seconds, stall = time.monotonic() - t0, b.eval("window.__stall.max")
+    print(f"web-test: {LARGE_DEMO}: shown after {seconds:.1f} s; the page showed {shown}; its thread's longest "
+          f"stall {stall:.0f} ms")
+    if stall > MAX_STALL_MS:
+        fail(f"{LARGE_DEMO}: the page's thread stalled {stall:.0f} ms (more than {MAX_STALL_MS}) while it loaded")
+    if not any("%" in s for s in shown):
+        fail(f"{LARGE_DEMO}: the page showed no progress with a count while it loaded ({shown})")
+    # The page keeps its view from one volume to the next.
+    v = b.eval("window.isoscope.view()")
+    flags = ["--demo", LARGE_DEMO, "--yaw", str(v["yaw"]), "--pitch", str(v["pitch"]), "--margin",
+             str((1 - v["zoom"]) / 2)]
+    check_scene(b, f"{LARGE_DEMO} at the page's view", page_frame(b), flags, sim, tmp, "large")
+
+
 def open_file(b, base, path):
     """A fresh page, then `path` through its file input (as a user picks it)."""
     b.send("Page.navigate", {"url": f"{base}?size={SIZE}"})
@@ -309,14 +352,15 @@ def main():
             b.wait(f"window.isoscope.frames > {frames} && !window.isoscope.pending() && "
                    "(() => { const v = window.isoscope.view(); return v.yaw === 50 && v.pitch === 30; })()",
                    "the dragged view and the new level to show", timeout=30)
-            check_scene(b, "hydrogen 32^3 dragged and at level 0.2", page_frame(b),
-                        ["--demo", "hydrogen:32", "--yaw", "50", "--pitch", "30", "--level", "0.2"], sim, tmp,
-                        "dragged")
+            dragged = ["--demo", "hydrogen:32", "--yaw", "50", "--pitch", "30", "--level", "0.2"]
+            check_scene(b, "hydrogen 32^3 dragged and at level 0.2", page_frame(b), dragged, sim, tmp, "dragged")
+            check_large(b, sim, tmp)
             if data and (data / FILE_SCENE).exists():
                 path = data / FILE_SCENE
                 open_file(b, base, path)
                 b.wait(f"(() => {{ const i = window.isoscope.info(); return window.isoscope.error !== null || "
-                       f"(i && i.name === {json.dumps(FILE_SCENE)} && window.isoscope.frames >= 2); }})()",
+                       f"(i && i.name === {json.dumps(FILE_SCENE)} && window.isoscope.frames >= 2 && "
+                       "!window.isoscope.pending()); })()",
                        f"{FILE_SCENE} to load")
                 check_scene(b, f"{FILE_SCENE} from the file input", page_frame(b), [str(path)], sim, tmp, "file")
             else:

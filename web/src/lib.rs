@@ -9,6 +9,11 @@
 //! (the volume, the settings, the last frame and picture) and turns it into
 //! values JavaScript takes: RGBA pixels, the samples as text, and JSON.
 //!
+//! The page runs it in a Web Worker (`web/worker.js`), so that loading a
+//! volume and building a frame never hold up the page; long work is told
+//! to the worker's global `isoscopeProgress(label, done, total)` function
+//! if it has one (`total` 0: a step with no count).
+//!
 //! Every method that can fail returns a JavaScript error with the message
 //! the command line would print; none panics on bad input.
 
@@ -17,10 +22,12 @@ use isoscope_core::beam::BeamConfig;
 use isoscope_core::contour::grid::Plane;
 use isoscope_core::engine::Board;
 use isoscope_core::view::View;
+use isoscope_sim::board::frames_for;
 use isoscope_sim::formats::Options;
 use isoscope_sim::info::{LEVEL_BINS, Summary, summarize};
 use isoscope_sim::link::WireVolume;
 use isoscope_sim::phosphor::{Phosphor, PhosphorConfig};
+use isoscope_sim::progress::Progress;
 use isoscope_sim::scene::{self, Scene, SceneConfig};
 use isoscope_sim::volume::{DemoSpec, LoadedVolume};
 use std::fmt::Write as _;
@@ -74,6 +81,37 @@ pub struct Scope {
 /// An `anyhow` error, its causes included, as a JavaScript error.
 fn js(e: anyhow::Error) -> JsError {
     JsError::new(&format!("{e:#}"))
+}
+
+#[cfg(target_arch = "wasm32")]
+#[wasm_bindgen]
+extern "C" {
+    /// The worker's progress function (`catch`: an error, e.g. none
+    /// defined, comes back as a value, not through the module's frames).
+    #[wasm_bindgen(catch, js_name = isoscopeProgress)]
+    fn progress_js(label: &str, done: usize, total: usize) -> Result<(), JsValue>;
+}
+
+/// Tell the page how long work goes: `label`, `done` of `total` units (0
+/// of 0: a step with no count). Nothing off wasm32 or with no
+/// `isoscopeProgress` in the global scope.
+fn report(label: &'static str, done: usize, total: usize) {
+    #[cfg(target_arch = "wasm32")]
+    let _ = progress_js(label, done, total);
+    #[cfg(not(target_arch = "wasm32"))]
+    let _ = (label, done, total);
+}
+
+/// [`report`] for the frames fed to the board: after the last one the
+/// board stitches and orders the surface, which takes a while of its own
+/// on a large volume. (On the host the memory may grow and the volume be
+/// fed again: counted again from 0.)
+fn report_feeding(label: &'static str, done: usize, total: usize) {
+    match done.checked_rem(total) {
+        Some(0) => report("stitching and ordering the surface", 0, 0),
+        Some(n) => report(label, n, total),
+        None => report(label, done, total),
+    }
 }
 
 #[wasm_bindgen]
@@ -270,13 +308,15 @@ impl Scope {
                 MAX_VOLUME_BYTES >> 20
             );
         }
+        report("making the demo", 0, 0);
         let vol = LoadedVolume::demo(spec)?;
         let name = format!("{}:{}", spec.demo.name(), spec.n);
-        self.set_volume(name, &vol, vec![spec.demo.default_level()], Vec::new())
+        self.set_volume(name, &vol, Some(vec![spec.demo.default_level()]), Vec::new())
     }
 
     fn file(&mut self, name: &str, bytes: &[u8]) -> Result<()> {
         let opts = Options { index: 0, max_bytes: MAX_VOLUME_BYTES, ..Options::default() };
+        report("reading the file", 0, 0);
         let Some((vol, notes)) = LoadedVolume::read_known_bytes(name, bytes, &opts)? else {
             bail!(
                 "{name}: not a volume file the page knows by its name or first bytes \
@@ -284,23 +324,30 @@ impl Scope {
                  raw files need isoscope-sim's --dims and --dtype)"
             );
         };
-        // The level `render` draws a file at: the first suggested over
-        // `LEVEL_BINS` bins, as in the summary the page shows.
-        let Some(&level) = summarize(&vol, LEVEL_BINS).suggested.first() else {
-            bail!("{name}: its values suggest no level to draw (it is constant or empty)");
-        };
-        self.set_volume(name.to_string(), &vol, vec![level], notes)
+        self.set_volume(name.to_string(), &vol, None, notes)
     }
 
+    /// Make `vol` the volume, drawn at `levels`, or for a file (`None`)
+    /// at the level `render` draws it at: the first suggested over
+    /// `LEVEL_BINS` bins, as in the summary the page shows.
     fn set_volume(
         &mut self,
         name: String,
         vol: &LoadedVolume,
-        levels: Vec<f32>,
+        levels: Option<Vec<f32>>,
         notes: Vec<String>,
     ) -> Result<()> {
-        let wire = WireVolume::from_loaded(vol)?;
+        report("summarizing the volume", 0, 0);
         let summary = summarize(vol, LEVEL_BINS);
+        let levels = match levels {
+            Some(l) => l,
+            None => match summary.suggested.first() {
+                Some(&l) => vec![l],
+                None => bail!("{name}: its values suggest no level to draw (it is constant or empty)"),
+            },
+        };
+        report("preparing the volume for the board", 0, 0);
+        let wire = WireVolume::from_loaded(vol)?;
         self.levels.clone_from(&levels);
         self.volume = Some(Volume { name, wire, summary, default_levels: levels, notes });
         self.scene = None;
@@ -332,12 +379,22 @@ impl Scope {
         SceneConfig { planes: self.planes.clone(), every, view, beam, ..base }
     }
 
+    /// The frame of `cfg`, as [`scene::build`] makes it, its progress
+    /// told to the page.
+    fn build(vol: &Volume, cfg: &SceneConfig) -> Result<Scene> {
+        let progress = Progress::with_hook("contouring", frames_for(&vol.wire, &cfg.send()?), report_feeding);
+        scene::with_board(&vol.wire, cfg, Some(&progress), |board, capacity| {
+            Ok(scene::scene_of(board, capacity, cfg))
+        })
+    }
+
     fn redraw(&mut self) -> Result<()> {
         let vol = self.volume.as_ref().context("no volume loaded")?;
         let cfg = self.config(vol);
         let t0 = web_time::Instant::now();
-        let built = scene::build(&vol.wire, &cfg)?;
+        let built = Self::build(vol, &cfg)?;
         let t1 = web_time::Instant::now();
+        report("drawing the picture", 0, 0);
         // A frame on a dark screen, as `render` draws it (one refresh).
         self.screen.clear();
         scene::refresh(&mut self.screen, &built, 1, None);
