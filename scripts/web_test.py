@@ -11,6 +11,9 @@ install beyond the browser), and for each scene checks that
 - the canvas equals `isoscope-sim render`'s PNG of that scene, and the
   first scene's also the golden tests/golden/hydrogen32.png, within the
   tolerances below;
+- the page's exports, downloaded by clicking their buttons, are the command
+  line's files of the scene byte for byte: the PNG `render` writes, its
+  `--samples` text, `contour --format svg`'s SVG and `wav`'s WAV;
 - a large volume loads in the page's worker: the page shows the work's
   progress and its thread never stalls for long meanwhile.
 
@@ -266,6 +269,65 @@ def check_scene(b, name, got, sim_flags, sim, tmp, tag, golden=None):
         compare(name, canvas, read_png(golden), f"the golden {golden.name}", golden=True)
 
 
+# The exports: button, file name ending, and how the command line makes the
+# same file (None: render's PNG or samples, made by check_scene).
+EXPORTS = [("png", ".png"), ("samples", ".samples.txt"), ("svg", ".svg"), ("wav", ".wav")]
+
+
+def download(b, kind, folder, name):
+    """Click the page's export button `kind` (a real click) and wait for
+    its download, `name` in `folder`."""
+    b.send("Browser.setDownloadBehavior", {"behavior": "allow", "downloadPath": str(folder)}, session=False)
+    b.eval(f"document.getElementById('export-{kind}').scrollIntoView()")
+    r = b.eval(f"(() => {{ const r = document.getElementById('export-{kind}').getBoundingClientRect(); "
+               "return [r.left + r.width / 2, r.top + r.height / 2]; })()")
+    x, y = round(r[0]), round(r[1])
+    mouse = {"button": "left", "buttons": 1, "clickCount": 1}
+    b.send("Input.dispatchMouseEvent", {"type": "mousePressed", "x": x, "y": y, **mouse})
+    b.send("Input.dispatchMouseEvent", {"type": "mouseReleased", "x": x, "y": y, **mouse})
+    path = folder / name
+    deadline = time.monotonic() + 60
+    while not path.exists():
+        err = b.eval("window.isoscope.error")
+        if err:
+            fail(f"exporting {kind}: the page shows an error: {err}")
+        if time.monotonic() > deadline:
+            fail(f"no download {name} within 60 s of clicking export-{kind} (in {folder}: "
+                 f"{sorted(p.name for p in folder.iterdir()) if folder.exists() else []})")
+        time.sleep(0.05)
+    return path.read_bytes()
+
+
+def check_exports(b, name, flags, sim, tmp, tag, stem, svg=True):
+    """The page's four exports of the scene against the command line's
+    files; `flags` are render's for it (check_scene wrote its PNG and
+    samples). `svg`: whether `contour --format svg` draws this scene (it
+    has no --board)."""
+    every = b.eval("window.isoscope.stats().every")
+    want = {"png": (tmp / f"{tag}.png").read_bytes(), "samples": (tmp / f"{tag}.txt").read_bytes()}
+    if svg:
+        out = tmp / f"{tag}.svg"
+        subprocess.run([sim, "contour", "--format", "svg", *flags, "--every", str(every), "-o", str(out)],
+                       check=True, stderr=subprocess.DEVNULL)
+        want["svg"] = out.read_bytes()
+    out = tmp / f"{tag}.wav"
+    subprocess.run([sim, "wav", *flags, "-o", str(out)], check=True, stderr=subprocess.DEVNULL)
+    want["wav"] = out.read_bytes()
+    folder = tmp / f"downloads-{tag}"
+    folder.mkdir()
+    for kind, ending in EXPORTS:
+        if kind not in want:
+            continue
+        got = download(b, kind, folder, stem + ending)
+        if got != want[kind]:
+            first = next((i for i, (x, y) in enumerate(zip(got, want[kind])) if x != y),
+                         min(len(got), len(want[kind])))
+            fail(f"{name}: the page's {kind} export ({len(got)} bytes) differs from the command line's "
+                 f"({len(want[kind])} bytes) from byte {first}")
+    print(f"web-test: {name}: the {', '.join(k for k, _ in EXPORTS if k in want)} exports equal the command "
+          f"line's files, byte for byte ({', '.join(f'{len(v)}' for v in want.values())} bytes)")
+
+
 def check_large(b, sim, tmp):
     """Pick the large demo from the page's list: the page shows the work's
     progress, its thread keeps running, and the frame is render's."""
@@ -331,6 +393,9 @@ def main():
                 b.send("Page.navigate", {"url": f"{base}?{query}&size={SIZE}"})
                 b.wait(READY, f"{name} to show")
                 check_scene(b, name, page_frame(b), flags, sim, tmp, f"scene{i}", GOLDEN if i == 0 else None)
+                if "--board" in flags:
+                    check_exports(b, name, flags, sim, tmp, f"scene{i}", query.split("&")[0][5:].replace(":", "-"),
+                                  svg=False)
             # The controls: drag on the screen (40 px right, 20 px down: yaw
             # and pitch +20 and +10 degrees at half a degree a pixel), then
             # the level slider to 0.2; the page then draws render's scene.
@@ -354,6 +419,7 @@ def main():
                    "the dragged view and the new level to show", timeout=30)
             dragged = ["--demo", "hydrogen:32", "--yaw", "50", "--pitch", "30", "--level", "0.2"]
             check_scene(b, "hydrogen 32^3 dragged and at level 0.2", page_frame(b), dragged, sim, tmp, "dragged")
+            check_exports(b, "hydrogen 32^3 dragged and at level 0.2", dragged, sim, tmp, "dragged", "hydrogen-32")
             check_large(b, sim, tmp)
             if data and (data / FILE_SCENE).exists():
                 path = data / FILE_SCENE
@@ -363,6 +429,8 @@ def main():
                        "!window.isoscope.pending()); })()",
                        f"{FILE_SCENE} to load")
                 check_scene(b, f"{FILE_SCENE} from the file input", page_frame(b), [str(path)], sim, tmp, "file")
+                check_exports(b, f"{FILE_SCENE} from the file input", [str(path)], sim, tmp, "file",
+                              FILE_SCENE.rsplit(".", 1)[0])
             else:
                 print(f"web-test: note: no {FILE_SCENE} in the data folder; the file input is not tested")
             # A bad file: a clear error in the page, no crash.

@@ -2,8 +2,8 @@
 // the volume, builds the frame through isoscope's one picture pipeline and
 // draws it on the simulated phosphor. The Scope lives in a worker
 // (worker.js), so that long work never holds up the page; this file only
-// moves values between the controls and the worker, and pixels onto the
-// canvas.
+// moves values between the controls and the worker, pixels onto the
+// canvas, and the worker's exports into downloads.
 //
 // URL parameters (all optional): demo=NAME:N, level=L[,L...], yaw, pitch,
 // zoom (0.1 to 1), axes=xy,xz,yz, every=N (0: auto), board=f407, spin=1,
@@ -270,6 +270,37 @@ async function loadFile(file) {
   if (await load('file', { file })) $('demo').value = '';
 }
 
+// The exports: the command line's files of the frame on the screen.
+const EXPORTS = {
+  png: ['image/png', '.png'],
+  samples: ['text/plain', '.samples.txt'],
+  svg: ['image/svg+xml', '.svg'],
+  wav: ['audio/wav', '.wav'],
+};
+
+// A file name for the volume: `hydrogen:32` as hydrogen-32, `head.nii.gz`
+// as head.
+function baseName() {
+  const name = info ? info.name.replace(/\.gz$/i, '').replace(/\.[a-z0-9]+$/i, '') : 'isoscope';
+  return name.replace(/[^A-Za-z0-9._-]+/g, '-') || 'isoscope';
+}
+
+async function exportFile(kind) {
+  const [type, ext] = EXPORTS[kind];
+  try {
+    const data = await call('export', { kind });
+    const url = URL.createObjectURL(new Blob([data], { type }));
+    const a = Object.assign(document.createElement('a'), { href: url, download: baseName() + ext });
+    document.body.append(a);
+    a.click();
+    a.remove();
+    setTimeout(() => URL.revokeObjectURL(url), 60_000);
+    clearError();
+  } catch (e) {
+    showError(e);
+  }
+}
+
 function wireControls() {
   const canvas = $('screen');
   let drag = null;
@@ -328,6 +359,9 @@ function wireControls() {
     Object.assign(view, DEFAULT_VIEW);
     changed();
   });
+  for (const kind of Object.keys(EXPORTS)) {
+    $(`export-${kind}`).addEventListener('click', () => exportFile(kind));
+  }
 }
 
 let last = null;

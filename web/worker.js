@@ -26,6 +26,7 @@ self.isoscopeProgress = (label, done, total) => {
 
 // A request's answer: a value, and the buffers handed over with it.
 const answer = (value, transfer = []) => ({ value, transfer });
+const bytes = (u8) => answer(u8, [u8.buffer]);
 
 const ops = {
   async init({ size }) {
@@ -57,6 +58,20 @@ const ops = {
   },
   samples() {
     return answer(scope.samples_text());
+  },
+  export({ kind }) {
+    switch (kind) {
+      case 'png':
+        return bytes(scope.png());
+      case 'samples':
+        return bytes(new TextEncoder().encode(scope.samples_text()));
+      case 'svg':
+        return bytes(scope.svg());
+      case 'wav':
+        return bytes(scope.wav());
+      default:
+        throw new Error(`no export called ${kind}`);
+    }
   },
 };
 

@@ -8,6 +8,11 @@
 //! same phosphor model ([`Phosphor`]). This crate holds the page's state
 //! (the volume, the settings, the last frame and picture) and turns it into
 //! values JavaScript takes: RGBA pixels, the samples as text, and JSON.
+//! Its exports are the command line's files, made by the same functions:
+//! `render`'s PNG ([`Phosphor::encode_png`]), `render --samples`'s text
+//! ([`scene::samples_text`]), `contour --format svg`'s SVG
+//! ([`isoscope_sim::svg::write_svg`]) and `wav`'s WAV
+//! ([`isoscope_sim::wav::write_wav`], with its defaults).
 //!
 //! The page runs it in a Web Worker (`web/worker.js`), so that loading a
 //! volume and building a frame never hold up the page; long work is told
@@ -30,6 +35,7 @@ use isoscope_sim::phosphor::{Phosphor, PhosphorConfig};
 use isoscope_sim::progress::Progress;
 use isoscope_sim::scene::{self, Scene, SceneConfig};
 use isoscope_sim::volume::{DemoSpec, LoadedVolume};
+use isoscope_sim::wav::{WavConfig, audio_beam, write_wav};
 use std::fmt::Write as _;
 use wasm_bindgen::prelude::*;
 
@@ -232,6 +238,32 @@ impl Scope {
         self.scene.as_ref().map_or_else(String::new, |s| scene::samples_text(&s.samples))
     }
 
+    /// The picture as `render` writes it: an 8-bit RGB PNG file.
+    ///
+    /// # Errors
+    /// No frame drawn for the settings.
+    pub fn png(&self) -> Result<Vec<u8>, JsError> {
+        self.png_bytes().map_err(js)
+    }
+
+    /// The frame's drawing commands as `contour --format svg` writes them.
+    ///
+    /// # Errors
+    /// No frame drawn for the settings.
+    pub fn svg(&self) -> Result<Vec<u8>, JsError> {
+        self.svg_bytes().map_err(js)
+    }
+
+    /// The frame as `isoscope-sim wav` writes it with its defaults: drawn
+    /// again with the beam made for a 48 kHz sound card
+    /// ([`audio_beam`]), five seconds of it, stereo 16-bit PCM.
+    ///
+    /// # Errors
+    /// No frame drawn for the settings.
+    pub fn wav(&self) -> Result<Vec<u8>, JsError> {
+        self.wav_bytes().map_err(js)
+    }
+
     /// The volume as JSON: `name`, `dims`, `dtype`, `range` (or null),
     /// `histogram`, `suggested` and `default_levels`, and the readers'
     /// `notes`; `null` with no volume.
@@ -388,6 +420,39 @@ impl Scope {
         })
     }
 
+    /// The frame on the screen, if it is of the settings.
+    fn shown(&self) -> Result<&Scene> {
+        self.scene.as_ref().context("no frame drawn for these settings: nothing to export")
+    }
+
+    fn png_bytes(&self) -> Result<Vec<u8>> {
+        self.shown()?;
+        Ok(self.screen.encode_png())
+    }
+
+    fn svg_bytes(&self) -> Result<Vec<u8>> {
+        let scene = self.shown()?;
+        let vol = self.volume.as_ref().context("no volume loaded")?;
+        let mut out = Vec::new();
+        isoscope_sim::svg::write_svg(&mut out, &scene.commands, self.config(vol).view.bits)?;
+        Ok(out)
+    }
+
+    fn wav_bytes(&self) -> Result<Vec<u8>> {
+        self.shown()?;
+        let vol = self.volume.as_ref().context("no volume loaded")?;
+        let cfg = self.config(vol);
+        // `wav`'s defaults: its --audio-rate and --seconds are
+        // `WavConfig`'s, its beam is made for that rate.
+        let wav = WavConfig { bits: cfg.view.bits, ..WavConfig::default() };
+        let cfg = SceneConfig { beam: audio_beam(wav.rate_hz, cfg.view.bits), ..cfg };
+        let built = Self::build(vol, &cfg)?;
+        report("writing the WAV file", 0, 0);
+        let mut out = std::io::Cursor::new(Vec::new());
+        write_wav(&mut out, &built.samples, &wav)?;
+        Ok(out.into_inner())
+    }
+
     fn redraw(&mut self) -> Result<()> {
         let vol = self.volume.as_ref().context("no volume loaded")?;
         let cfg = self.config(vol);
@@ -487,6 +552,30 @@ mod tests {
         assert_eq!(s.scene.as_ref().unwrap().samples, want.samples);
         assert_eq!(s.pixels().len(), 64 * 64 * 4);
         assert!(s.stats().contains("\"points\":"));
+    }
+
+    #[test]
+    fn the_exports_are_the_command_lines_files() {
+        let mut s = Scope::with_size(64).unwrap();
+        s.demo("torus:12").unwrap();
+        assert!(s.png_bytes().is_err() && s.svg_bytes().is_err() && s.wav_bytes().is_err(), "no frame yet");
+        s.redraw().unwrap();
+        let spec: DemoSpec = "torus:12".parse().unwrap();
+        let vol = WireVolume::from_loaded(&LoadedVolume::demo(spec).unwrap()).unwrap();
+        let cfg = SceneConfig { levels: vec![spec.demo.default_level()], ..SceneConfig::default() };
+        let want = scene::build(&vol, &cfg).unwrap();
+        let screen = scene::render(&want, PhosphorConfig::with_size(64, 64), 1, None).unwrap();
+        assert_eq!(s.png_bytes().unwrap(), screen.encode_png());
+        let mut svg = Vec::new();
+        isoscope_sim::svg::write_svg(&mut svg, &want.commands, 12).unwrap();
+        assert_eq!(s.svg_bytes().unwrap(), svg);
+        let audio = scene::build(&vol, &SceneConfig { beam: audio_beam(48_000, 12), ..cfg }).unwrap();
+        let mut wav = std::io::Cursor::new(Vec::new());
+        write_wav(&mut wav, &audio.samples, &WavConfig::default()).unwrap();
+        assert_eq!(s.wav_bytes().unwrap(), wav.into_inner());
+        // A change of settings not drawn yet: nothing to export.
+        s.set_levels(vec![0.5]);
+        assert!(s.png_bytes().is_err());
     }
 
     #[test]
