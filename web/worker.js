@@ -53,8 +53,10 @@ const ops = {
     scope.set_every(s.every);
     scope.set_board(s.board);
     if (!scope.update()) return answer(null);
+    const t0 = performance.now();
     const pixels = scope.pixels();
-    return answer({ size: scope.size(), pixels, stats: scope.stats() }, [pixels.buffer]);
+    const pixelsMs = performance.now() - t0;
+    return answer({ size: scope.size(), pixels, pixelsMs, stats: scope.stats() }, [pixels.buffer]);
   },
   samples() {
     return answer(scope.samples_text());
