@@ -227,6 +227,20 @@ def check_exports(b, name, flags, sim, tmp, tag, stem, svg=True):
           f"line's files, byte for byte ({', '.join(f'{len(v)}' for v in want.values())} bytes)")
 
 
+def drag(b):
+    """Drag on the screen: 40 px right and 20 down, yaw and pitch +20 and +10
+    degrees at half a degree a pixel."""
+    box = b.eval("(() => { const c = document.getElementById('screen'); c.scrollIntoView({ block: 'center' }); "
+                 "const r = c.getBoundingClientRect(); "
+                 "return [r.left + r.width / 2, r.top + r.height / 2]; })()")
+    x, y = round(box[0]), round(box[1])
+    mouse = {"button": "left", "buttons": 1, "clickCount": 1}
+    b.send("Input.dispatchMouseEvent", {"type": "mousePressed", "x": x, "y": y, **mouse})
+    for step in range(1, 5):
+        b.send("Input.dispatchMouseEvent", {"type": "mouseMoved", "x": x + 10 * step, "y": y + 5 * step, **mouse})
+    b.send("Input.dispatchMouseEvent", {"type": "mouseReleased", "x": x + 40, "y": y + 20, **mouse})
+
+
 def check_large(b, sim, tmp):
     """Pick the large demo from the page's list: the page shows the work's
     progress, its thread keeps running, and the frame is render's."""
@@ -281,15 +295,7 @@ def main():
         b.send("Page.navigate", {"url": f"{base}?demo=hydrogen:32&size={SIZE}"})
         b.wait(READY, "hydrogen to show")
         frames = b.eval("window.isoscope.frames")
-        box = b.eval("(() => { const r = document.getElementById('screen').getBoundingClientRect(); "
-                     "return [r.left + r.width / 2, r.top + r.height / 2]; })()")
-        x, y = round(box[0]), round(box[1])
-        mouse = {"button": "left", "buttons": 1, "clickCount": 1}
-        b.send("Input.dispatchMouseEvent", {"type": "mousePressed", "x": x, "y": y, **mouse})
-        for step in range(1, 5):
-            b.send("Input.dispatchMouseEvent", {"type": "mouseMoved", "x": x + 10 * step, "y": y + 5 * step,
-                                                **mouse})
-        b.send("Input.dispatchMouseEvent", {"type": "mouseReleased", "x": x + 40, "y": y + 20, **mouse})
+        drag(b)
         b.eval("(() => { const s = document.getElementById('level'); s.value = '0.2'; "
                "s.dispatchEvent(new Event('input')); })()")
         # A redraw after the slider's event has both changes.
@@ -310,6 +316,16 @@ def main():
             check_scene(b, f"{FILE_SCENE} from the file input", page_frame(b), [str(path)], sim, tmp, "file")
             check_exports(b, f"{FILE_SCENE} from the file input", [str(path)], sim, tmp, "file",
                           FILE_SCENE.rsplit(".", 1)[0])
+            # Turned: the page starts from the memory the head needed (its
+            # surface does not fit the host's first size), and must still
+            # draw render's frame.
+            frames = b.eval("window.isoscope.frames")
+            drag(b)
+            b.wait(f"window.isoscope.frames > {frames} && !window.isoscope.pending() && "
+                   "(() => { const v = window.isoscope.view(); return v.yaw === 50 && v.pitch === 30; })()",
+                   f"{FILE_SCENE} turned to show", timeout=60)
+            check_scene(b, f"{FILE_SCENE} dragged", page_frame(b), [str(path), "--yaw", "50", "--pitch", "30"],
+                        sim, tmp, "file-dragged")
         else:
             print(f"web-test: note: no {FILE_SCENE} in the data folder; the file input is not tested")
         # A bad file: a clear error in the page, no crash.

@@ -78,10 +78,24 @@ pub struct Scope {
     board: Option<Board>,
     /// The frame of the settings, `None` when they changed since.
     scene: Option<Scene>,
+    /// The host memory, in points, the last frame's surface needed, and
+    /// the settings it was for: a frame that differs only in its view
+    /// starts there ([`scene::with_board_from`]).
+    fit: Option<(Fit, usize)>,
     /// Milliseconds the last frame took to build and draw.
     build_ms: f64,
     draw_ms: f64,
     screen: Phosphor,
+}
+
+/// What decides whether a surface fits a memory: every setting but the
+/// view.
+#[derive(Debug, Clone, PartialEq)]
+struct Fit {
+    levels: Vec<f32>,
+    planes: Vec<Plane>,
+    every: usize,
+    board: Option<Board>,
 }
 
 /// An `anyhow` error, its causes included, as a JavaScript error.
@@ -323,6 +337,7 @@ impl Scope {
             zoom: DEFAULT_ZOOM,
             board: None,
             scene: None,
+            fit: None,
             build_ms: 0.0,
             draw_ms: 0.0,
             screen,
@@ -383,6 +398,7 @@ impl Scope {
         self.levels.clone_from(&levels);
         self.volume = Some(Volume { name, wire, summary, default_levels: levels, notes });
         self.scene = None;
+        self.fit = None;
         Ok(())
     }
 
@@ -412,12 +428,23 @@ impl Scope {
     }
 
     /// The frame of `cfg`, as [`scene::build`] makes it, its progress
-    /// told to the page.
-    fn build(vol: &Volume, cfg: &SceneConfig) -> Result<Scene> {
+    /// told to the page. On the host's memory it starts at the size the
+    /// last frame needed if only the view changed since
+    /// ([`scene::with_board_from`]: the same frame, without contouring the
+    /// surface again at the sizes that did not fit).
+    fn build(&self, vol: &Volume, cfg: &SceneConfig) -> Result<Scene> {
+        let points = match &self.fit {
+            Some((fit, points)) if *fit == self.fit_key() => *points,
+            _ => scene::HOST_START_POINTS,
+        };
         let progress = Progress::with_hook("contouring", frames_for(&vol.wire, &cfg.send()?), report_feeding);
-        scene::with_board(&vol.wire, cfg, Some(&progress), |board, capacity| {
+        scene::with_board_from(&vol.wire, cfg, points, Some(&progress), |board, capacity| {
             Ok(scene::scene_of(board, capacity, cfg))
         })
+    }
+
+    fn fit_key(&self) -> Fit {
+        Fit { levels: self.levels.clone(), planes: self.planes.clone(), every: self.every, board: self.board }
     }
 
     /// The frame on the screen, if it is of the settings.
@@ -446,7 +473,7 @@ impl Scope {
         // `WavConfig`'s, its beam is made for that rate.
         let wav = WavConfig { bits: cfg.view.bits, ..WavConfig::default() };
         let cfg = SceneConfig { beam: audio_beam(wav.rate_hz, cfg.view.bits), ..cfg };
-        let built = Self::build(vol, &cfg)?;
+        let built = self.build(vol, &cfg)?;
         report("writing the WAV file", 0, 0);
         let mut out = std::io::Cursor::new(Vec::new());
         write_wav(&mut out, &built.samples, &wav)?;
@@ -457,7 +484,7 @@ impl Scope {
         let vol = self.volume.as_ref().context("no volume loaded")?;
         let cfg = self.config(vol);
         let t0 = web_time::Instant::now();
-        let built = Self::build(vol, &cfg)?;
+        let built = self.build(vol, &cfg)?;
         let t1 = web_time::Instant::now();
         report("drawing the picture", 0, 0);
         // A frame on a dark screen, as `render` draws it (one refresh).
@@ -465,6 +492,7 @@ impl Scope {
         scene::refresh(&mut self.screen, &built, 1, None);
         self.build_ms = (t1 - t0).as_secs_f64() * 1e3;
         self.draw_ms = t1.elapsed().as_secs_f64() * 1e3;
+        self.fit = Some((self.fit_key(), built.capacity.points));
         self.scene = Some(built);
         Ok(())
     }
@@ -576,6 +604,24 @@ mod tests {
         // A change of settings not drawn yet: nothing to export.
         s.set_levels(vec![0.5]);
         assert!(s.png_bytes().is_err());
+    }
+
+    #[test]
+    fn a_turn_draws_what_render_draws_from_the_size_that_fit() {
+        // gyroid:32 needs 262,144 points, four times the host's start.
+        let mut s = Scope::with_size(64).unwrap();
+        s.demo("gyroid:32").unwrap();
+        s.redraw().unwrap();
+        assert_eq!(s.fit.as_ref().unwrap().1, 4 * scene::HOST_START_POINTS);
+        s.set_view(75.0, -20.0, 0.8);
+        s.redraw().unwrap();
+        let vol =
+            WireVolume::from_loaded(&LoadedVolume::demo("gyroid:32".parse().unwrap()).unwrap()).unwrap();
+        let cfg = s.config(s.volume.as_ref().unwrap());
+        assert_eq!(s.scene.as_ref().unwrap().samples, scene::build(&vol, &cfg).unwrap().samples);
+        // Another level starts again from the host's first size.
+        s.set_levels(vec![0.5]);
+        assert_ne!(s.fit.as_ref().unwrap().0, s.fit_key());
     }
 
     #[test]
