@@ -2,32 +2,35 @@
 """The web app in a real browser: headless Chromium against target/web.
 
 Called by scripts/web-test (which builds the page and installs Chromium).
-Serves target/web with `isoscope-sim serve` on a free port, drives Chromium over the DevTools
-protocol on a pipe (--remote-debugging-pipe: no websocket, nothing to
-install beyond the browser), and for each scene checks that
+Serves target/web and drives Chromium with scripts/web_driver.py, and for
+each scene checks that
 
 - the page's frame (window.isoscope.samples(), `x y beam` a line) equals
   `isoscope-sim render --samples` for the same scene, byte for byte;
 - the canvas equals `isoscope-sim render`'s PNG of that scene, and the
   first scene's also the golden tests/golden/hydrogen32.png, within the
-  tolerances below.
+  tolerances below;
+- the page's exports, downloaded by clicking their buttons, are the command
+  line's files of the scene byte for byte: the PNG `render` writes, its
+  `--samples` text, `contour --format svg`'s SVG and `wav`'s WAV;
+- a large volume loads in the page's worker: the page shows the work's
+  progress and its thread never stalls for long meanwhile.
 
 Standard library only. Usage: web_test.py SIM_BINARY [DATA_DIR]
 """
 
 import base64
 import json
-import os
-import shutil
 import subprocess
 import sys
-import tempfile
 import time
 import zlib
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-SITE = ROOT / "target" / "web"
+import web_driver
+from web_driver import READY, ROOT, click, fail, open_file
+
+web_driver.PROG = "web-test"
 GOLDEN = ROOT / "tests" / "golden" / "hydrogen32.png"
 SIZE = 256
 
@@ -59,101 +62,14 @@ SCENES = [
 ]
 # A real volume, opened through the page's file input.
 FILE_SCENE = "brainsmall.den"
+# A large demo, picked from the page's list: seconds of work in the worker.
+LARGE_DEMO = "gyroid:128"
+# The longest the page's thread may go without running a 10 ms timer while
+# the large demo loads (about 2.4 s of work in the worker on this project's
+# machine; a page doing it on its own thread stalls that long).
+MAX_STALL_MS = 250
 
 
-def fail(msg):
-    print(f"web-test: FAIL: {msg}", file=sys.stderr)
-    sys.exit(1)
-
-
-def serve(sim):
-    """`isoscope-sim serve` on a free port; its process and base address."""
-    proc = subprocess.Popen([sim, "serve", "--dir", str(SITE), "--listen", "127.0.0.1:0"],
-                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-    first = proc.stdout.readline().strip()
-    if not first.startswith("http://"):
-        proc.kill()
-        fail(f"isoscope-sim serve printed {first!r}, not its address")
-    return proc, first.split("?")[0] + "index.html"
-
-
-class Browser:
-    """Chromium with the DevTools protocol on fds 3 (in) and 4 (out)."""
-
-    def __init__(self, exe, profile):
-        to_child_r, self.to_child = os.pipe()
-        self.from_child, from_child_w = os.pipe()
-        args = [exe, "--headless=new", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                "--disable-component-update", "--disable-sync", "--no-first-run", "--disable-extensions",
-                "--force-color-profile=srgb", "--remote-debugging-pipe", f"--user-data-dir={profile}",
-                "about:blank"]
-
-        def fds():
-            os.dup2(to_child_r, 3)
-            os.dup2(from_child_w, 4)
-
-        self.proc = subprocess.Popen(args, pass_fds=(3, 4), preexec_fn=fds, stdout=subprocess.DEVNULL,
-                                     stderr=subprocess.DEVNULL)
-        os.close(to_child_r)
-        os.close(from_child_w)
-        self.buf = b""
-        self.next_id = 0
-        self.session = None
-
-    def send(self, method, params=None, session=True, timeout=60):
-        self.next_id += 1
-        msg = {"id": self.next_id, "method": method, "params": params or {}}
-        if session and self.session:
-            msg["sessionId"] = self.session
-        os.write(self.to_child, json.dumps(msg).encode() + b"\0")
-        deadline = time.monotonic() + timeout
-        while True:
-            while b"\0" not in self.buf:
-                if time.monotonic() > deadline:
-                    fail(f"no answer to {method} within {timeout} s")
-                chunk = os.read(self.from_child, 1 << 20)
-                if not chunk:
-                    fail(f"Chromium closed the pipe during {method}")
-                self.buf += chunk
-            line, self.buf = self.buf.split(b"\0", 1)
-            reply = json.loads(line)
-            if reply.get("id") == self.next_id:
-                if "error" in reply:
-                    fail(f"{method}: {reply['error']}")
-                return reply.get("result", {})
-
-    def attach(self):
-        target = self.send("Target.createTarget", {"url": "about:blank"}, session=False)["targetId"]
-        self.session = self.send("Target.attachToTarget", {"targetId": target, "flatten": True},
-                                 session=False)["sessionId"]
-
-    def eval(self, expr, timeout=60):
-        r = self.send("Runtime.evaluate", {"expression": expr, "returnByValue": True, "awaitPromise": True},
-                      timeout=timeout)
-        if "exceptionDetails" in r:
-            fail(f"{expr}: {r['exceptionDetails']}")
-        return r["result"].get("value")
-
-    def wait(self, expr, what, timeout=60):
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if self.eval(expr):
-                return
-            time.sleep(0.05)
-        fail(f"timed out waiting for {what}")
-
-    def close(self):
-        try:
-            self.send("Browser.close", session=False, timeout=10)
-        except SystemExit:
-            pass
-        try:
-            self.proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-
-
-READY = "window.isoscope && (window.isoscope.ready || window.isoscope.error !== null)"
 CANVAS = """(() => {
   const c = document.getElementById('screen');
   const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
@@ -258,14 +174,106 @@ def check_scene(b, name, got, sim_flags, sim, tmp, tag, golden=None):
         compare(name, canvas, read_png(golden), f"the golden {golden.name}", golden=True)
 
 
-def open_file(b, base, path):
-    """A fresh page, then `path` through its file input (as a user picks it)."""
-    b.send("Page.navigate", {"url": f"{base}?size={SIZE}"})
-    b.wait(READY, "the page to show its first demo")
-    b.send("DOM.enable")
-    root = b.send("DOM.getDocument")["root"]["nodeId"]
-    node = b.send("DOM.querySelector", {"nodeId": root, "selector": "#file"})["nodeId"]
-    b.send("DOM.setFileInputFiles", {"nodeId": node, "files": [str(path)]})
+# The exports: button, file name ending, and how the command line makes the
+# same file (None: render's PNG or samples, made by check_scene).
+EXPORTS = [("png", ".png"), ("samples", ".samples.txt"), ("svg", ".svg"), ("wav", ".wav")]
+
+
+def download(b, kind, folder, name):
+    """Click the page's export button `kind` (a real click) and wait for
+    its download, `name` in `folder`."""
+    b.send("Browser.setDownloadBehavior", {"behavior": "allow", "downloadPath": str(folder)}, session=False)
+    click(b, f"export-{kind}")
+    path = folder / name
+    deadline = time.monotonic() + 60
+    while not path.exists():
+        err = b.eval("window.isoscope.error")
+        if err:
+            fail(f"exporting {kind}: the page shows an error: {err}")
+        if time.monotonic() > deadline:
+            fail(f"no download {name} within 60 s of clicking export-{kind} (in {folder}: "
+                 f"{sorted(p.name for p in folder.iterdir()) if folder.exists() else []})")
+        time.sleep(0.05)
+    return path.read_bytes()
+
+
+def check_exports(b, name, flags, sim, tmp, tag, stem, svg=True):
+    """The page's four exports of the scene against the command line's
+    files; `flags` are render's for it (check_scene wrote its PNG and
+    samples). `svg`: whether `contour --format svg` draws this scene (it
+    has no --board)."""
+    every = b.eval("window.isoscope.stats().every")
+    want = {"png": (tmp / f"{tag}.png").read_bytes(), "samples": (tmp / f"{tag}.txt").read_bytes()}
+    if svg:
+        out = tmp / f"{tag}.svg"
+        subprocess.run([sim, "contour", "--format", "svg", *flags, "--every", str(every), "-o", str(out)],
+                       check=True, stderr=subprocess.DEVNULL)
+        want["svg"] = out.read_bytes()
+    out = tmp / f"{tag}.wav"
+    subprocess.run([sim, "wav", *flags, "-o", str(out)], check=True, stderr=subprocess.DEVNULL)
+    want["wav"] = out.read_bytes()
+    folder = tmp / f"downloads-{tag}"
+    folder.mkdir()
+    for kind, ending in EXPORTS:
+        if kind not in want:
+            continue
+        got = download(b, kind, folder, stem + ending)
+        if got != want[kind]:
+            first = next((i for i, (x, y) in enumerate(zip(got, want[kind])) if x != y),
+                         min(len(got), len(want[kind])))
+            fail(f"{name}: the page's {kind} export ({len(got)} bytes) differs from the command line's "
+                 f"({len(want[kind])} bytes) from byte {first}")
+    print(f"web-test: {name}: the {', '.join(k for k, _ in EXPORTS if k in want)} exports equal the command "
+          f"line's files, byte for byte ({', '.join(f'{len(v)}' for v in want.values())} bytes)")
+
+
+def drag(b):
+    """Drag on the screen: 40 px right and 20 down, yaw and pitch +20 and +10
+    degrees at half a degree a pixel."""
+    box = b.eval("(() => { const c = document.getElementById('screen'); c.scrollIntoView({ block: 'center' }); "
+                 "const r = c.getBoundingClientRect(); "
+                 "return [r.left + r.width / 2, r.top + r.height / 2]; })()")
+    x, y = round(box[0]), round(box[1])
+    mouse = {"button": "left", "buttons": 1, "clickCount": 1}
+    b.send("Input.dispatchMouseEvent", {"type": "mousePressed", "x": x, "y": y, **mouse})
+    for step in range(1, 5):
+        b.send("Input.dispatchMouseEvent", {"type": "mouseMoved", "x": x + 10 * step, "y": y + 5 * step, **mouse})
+    b.send("Input.dispatchMouseEvent", {"type": "mouseReleased", "x": x + 40, "y": y + 20, **mouse})
+
+
+def check_large(b, sim, tmp):
+    """Pick the large demo from the page's list: the page shows the work's
+    progress, its thread keeps running, and the frame is render's."""
+    b.eval("(() => { window.__stall = { max: 0, last: performance.now() }; setInterval(() => { "
+           "const now = performance.now(); window.__stall.max = Math.max(window.__stall.max, now - "
+           "window.__stall.last); window.__stall.last = now; }, 10); })()")
+    frames = b.eval("window.isoscope.frames")
+    t0 = time.monotonic()
+    b.eval(f"(() => {{ const s = document.getElementById('demo'); s.value = {json.dumps(LARGE_DEMO)}; "
+           "s.dispatchEvent(new Event('change')); })()")
+    shown, done = [], (f"(() => {{ const i = window.isoscope.info(); return window.isoscope.error !== null || "
+                       f"(i && i.name === {json.dumps(LARGE_DEMO)} && window.isoscope.frames > {frames} && "
+                       "!window.isoscope.pending()); })()")
+    while not b.eval(done):
+        label = b.eval("document.getElementById('busy').hidden ? null : "
+                       "document.getElementById('busy-label').textContent")
+        if label and label.split(" (")[0] not in shown:
+            shown.append(label.split(" (")[0])
+        if time.monotonic() - t0 > 120:
+            fail(f"{LARGE_DEMO} did not show within 120 s")
+        time.sleep(0.03)
+    seconds, stall = time.monotonic() - t0, b.eval("window.__stall.max")
+    print(f"web-test: {LARGE_DEMO}: shown after {seconds:.1f} s; the page showed {shown}; its thread's longest "
+          f"stall {stall:.0f} ms")
+    if stall > MAX_STALL_MS:
+        fail(f"{LARGE_DEMO}: the page's thread stalled {stall:.0f} ms (more than {MAX_STALL_MS}) while it loaded")
+    if not any("%" in s for s in shown):
+        fail(f"{LARGE_DEMO}: the page showed no progress with a count while it loaded ({shown})")
+    # The page keeps its view from one volume to the next.
+    v = b.eval("window.isoscope.view()")
+    flags = ["--demo", LARGE_DEMO, "--yaw", str(v["yaw"]), "--pitch", str(v["pitch"]), "--margin",
+             str((1 - v["zoom"]) / 2)]
+    check_scene(b, f"{LARGE_DEMO} at the page's view", page_frame(b), flags, sim, tmp, "large")
 
 
 def main():
@@ -273,70 +281,64 @@ def main():
         fail("usage: web_test.py SIM_BINARY [DATA_DIR]")
     sim = sys.argv[1]
     data = Path(sys.argv[2]) if len(sys.argv) > 2 and sys.argv[2] else None
-    exe = shutil.which("chromium") or shutil.which("chromium-browser")
-    if not exe:
-        fail("no chromium on PATH (scripts/web-test installs it)")
-    if not (SITE / "index.html").exists():
-        fail(f"{SITE} holds no page: run scripts/web-build")
-    server, base = serve(sim)
-    with tempfile.TemporaryDirectory(prefix="isoscope-web-") as tmpdir:
-        tmp = Path(tmpdir)
-        b = Browser(exe, tmp / "profile")
-        try:
-            b.attach()
-            for i, (name, query, flags) in enumerate(SCENES):
-                b.send("Page.navigate", {"url": f"{base}?{query}&size={SIZE}"})
-                b.wait(READY, f"{name} to show")
-                check_scene(b, name, page_frame(b), flags, sim, tmp, f"scene{i}", GOLDEN if i == 0 else None)
-            # The controls: drag on the screen (40 px right, 20 px down: yaw
-            # and pitch +20 and +10 degrees at half a degree a pixel), then
-            # the level slider to 0.2; the page then draws render's scene.
-            b.send("Page.navigate", {"url": f"{base}?demo=hydrogen:32&size={SIZE}"})
-            b.wait(READY, "hydrogen to show")
+    with web_driver.session(sim) as (b, base, tmp):
+        for i, (name, query, flags) in enumerate(SCENES):
+            b.send("Page.navigate", {"url": f"{base}?{query}&size={SIZE}"})
+            b.wait(READY, f"{name} to show")
+            check_scene(b, name, page_frame(b), flags, sim, tmp, f"scene{i}", GOLDEN if i == 0 else None)
+            if "--board" in flags:
+                check_exports(b, name, flags, sim, tmp, f"scene{i}", query.split("&")[0][5:].replace(":", "-"),
+                              svg=False)
+        # The controls: drag on the screen (40 px right, 20 px down: yaw
+        # and pitch +20 and +10 degrees at half a degree a pixel), then
+        # the level slider to 0.2; the page then draws render's scene.
+        b.send("Page.navigate", {"url": f"{base}?demo=hydrogen:32&size={SIZE}"})
+        b.wait(READY, "hydrogen to show")
+        frames = b.eval("window.isoscope.frames")
+        drag(b)
+        b.eval("(() => { const s = document.getElementById('level'); s.value = '0.2'; "
+               "s.dispatchEvent(new Event('input')); })()")
+        # A redraw after the slider's event has both changes.
+        b.wait(f"window.isoscope.frames > {frames} && !window.isoscope.pending() && "
+               "(() => { const v = window.isoscope.view(); return v.yaw === 50 && v.pitch === 30; })()",
+               "the dragged view and the new level to show", timeout=30)
+        dragged = ["--demo", "hydrogen:32", "--yaw", "50", "--pitch", "30", "--level", "0.2"]
+        check_scene(b, "hydrogen 32^3 dragged and at level 0.2", page_frame(b), dragged, sim, tmp, "dragged")
+        check_exports(b, "hydrogen 32^3 dragged and at level 0.2", dragged, sim, tmp, "dragged", "hydrogen-32")
+        check_large(b, sim, tmp)
+        if data and (data / FILE_SCENE).exists():
+            path = data / FILE_SCENE
+            open_file(b, base, path, f"size={SIZE}")
+            b.wait(f"(() => {{ const i = window.isoscope.info(); return window.isoscope.error !== null || "
+                   f"(i && i.name === {json.dumps(FILE_SCENE)} && window.isoscope.frames >= 2 && "
+                   "!window.isoscope.pending()); })()",
+                   f"{FILE_SCENE} to load")
+            check_scene(b, f"{FILE_SCENE} from the file input", page_frame(b), [str(path)], sim, tmp, "file")
+            check_exports(b, f"{FILE_SCENE} from the file input", [str(path)], sim, tmp, "file",
+                          FILE_SCENE.rsplit(".", 1)[0])
+            # Turned: the page starts from the memory the head needed (its
+            # surface does not fit the host's first size), and must still
+            # draw render's frame.
             frames = b.eval("window.isoscope.frames")
-            box = b.eval("(() => { const r = document.getElementById('screen').getBoundingClientRect(); "
-                         "return [r.left + r.width / 2, r.top + r.height / 2]; })()")
-            x, y = round(box[0]), round(box[1])
-            mouse = {"button": "left", "buttons": 1, "clickCount": 1}
-            b.send("Input.dispatchMouseEvent", {"type": "mousePressed", "x": x, "y": y, **mouse})
-            for step in range(1, 5):
-                b.send("Input.dispatchMouseEvent", {"type": "mouseMoved", "x": x + 10 * step, "y": y + 5 * step,
-                                                    **mouse})
-            b.send("Input.dispatchMouseEvent", {"type": "mouseReleased", "x": x + 40, "y": y + 20, **mouse})
-            b.eval("(() => { const s = document.getElementById('level'); s.value = '0.2'; "
-                   "s.dispatchEvent(new Event('input')); })()")
-            # A redraw after the slider's event has both changes.
+            drag(b)
             b.wait(f"window.isoscope.frames > {frames} && !window.isoscope.pending() && "
                    "(() => { const v = window.isoscope.view(); return v.yaw === 50 && v.pitch === 30; })()",
-                   "the dragged view and the new level to show", timeout=30)
-            check_scene(b, "hydrogen 32^3 dragged and at level 0.2", page_frame(b),
-                        ["--demo", "hydrogen:32", "--yaw", "50", "--pitch", "30", "--level", "0.2"], sim, tmp,
-                        "dragged")
-            if data and (data / FILE_SCENE).exists():
-                path = data / FILE_SCENE
-                open_file(b, base, path)
-                b.wait(f"(() => {{ const i = window.isoscope.info(); return window.isoscope.error !== null || "
-                       f"(i && i.name === {json.dumps(FILE_SCENE)} && window.isoscope.frames >= 2); }})()",
-                       f"{FILE_SCENE} to load")
-                check_scene(b, f"{FILE_SCENE} from the file input", page_frame(b), [str(path)], sim, tmp, "file")
-            else:
-                print(f"web-test: note: no {FILE_SCENE} in the data folder; the file input is not tested")
-            # A bad file: a clear error in the page, no crash.
-            bad = tmp / "broken.nrrd"
-            bad.write_bytes(b"NRRD0004\ntype: float\ndimension: 3\nsizes: 4 4 4\nendian: little\nencoding: raw\n\n\x00\x00")
-            open_file(b, base, bad)
-            b.wait("window.isoscope.error !== null", "the page to report the broken file")
-            shown = b.eval("document.getElementById('error').hidden ? '' : "
-                           "document.getElementById('error').textContent")
-            if "broken.nrrd" not in shown or "truncated" not in shown:
-                fail(f"the broken file's error is not shown clearly: {shown!r}")
-            print(f"web-test: a broken file shows: {shown}")
-        finally:
-            b.close()
-            server.kill()
-            server.wait()
+                   f"{FILE_SCENE} turned to show", timeout=60)
+            check_scene(b, f"{FILE_SCENE} dragged", page_frame(b), [str(path), "--yaw", "50", "--pitch", "30"],
+                        sim, tmp, "file-dragged")
+        else:
+            print(f"web-test: note: no {FILE_SCENE} in the data folder; the file input is not tested")
+        # A bad file: a clear error in the page, no crash.
+        bad = tmp / "broken.nrrd"
+        bad.write_bytes(b"NRRD0004\ntype: float\ndimension: 3\nsizes: 4 4 4\nendian: little\nencoding: raw\n\n\x00\x00")
+        open_file(b, base, bad, f"size={SIZE}")
+        b.wait("window.isoscope.error !== null", "the page to report the broken file")
+        shown = b.eval("document.getElementById('error').hidden ? '' : "
+                       "document.getElementById('error').textContent")
+        if "broken.nrrd" not in shown or "truncated" not in shown:
+            fail(f"the broken file's error is not shown clearly: {shown!r}")
+        print(f"web-test: a broken file shows: {shown}")
     print("web-test: ok")
-
 
 if __name__ == "__main__":
     main()

@@ -1,44 +1,113 @@
 // The page: controls around the wasm Scope (web/src/lib.rs), which reads
 // the volume, builds the frame through isoscope's one picture pipeline and
-// draws it on the simulated phosphor. This file only moves values between
-// the controls and the Scope, and pixels onto the canvas.
+// draws it on the simulated phosphor. The Scope lives in a worker
+// (worker.js), so that long work never holds up the page; this file only
+// moves values between the controls and the worker, pixels onto the
+// canvas, and the worker's exports into downloads.
 //
 // URL parameters (all optional): demo=NAME:N, level=L[,L...], yaw, pitch,
 // zoom (0.1 to 1), axes=xy,xz,yz, every=N (0: auto), board=f407, spin=1,
 // size=PIXELS. Tests read window.isoscope (see docs/web.md).
 
-import init, { Scope } from './isoscope_web.js';
-
 const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
 const DEFAULT_VIEW = { yaw: 30, pitch: 20, zoom: 0.9 };
 const SPIN_DEG_PER_S = 20;
+// Work shown with its progress once it has run this long.
+const BUSY_AFTER_MS = 300;
 
 const view = { ...DEFAULT_VIEW };
-let scope = null;
+let levels = [];
 let info = null;
+let stats = null;
+// A setting changed since the last frame asked for; a frame is being
+// built; a volume is loading.
 let dirty = false;
+let building = false;
+let loading = false;
 let spinning = false;
 
 // What a test (or the console) reads: whether the first picture is up,
-// the last error, and the frame's samples as `render --samples` writes them.
+// the last error, the frame's samples as `render --samples` writes them (a
+// promise: the worker has them), and whether a redraw is due or under way.
 const api = {
   ready: false,
   error: null,
   frames: 0,
-  samples: () => (scope ? scope.samples_text() : ''),
-  stats: () => (scope ? JSON.parse(scope.stats()) : null),
+  // Milliseconds from asking the worker for the last frame to its pixels
+  // on the canvas.
+  frameMs: null,
+  // Called after each frame is on the canvas with its stats (for
+  // scripts/web_bench.py).
+  onframe: null,
+  samples: () => call('samples'),
+  stats: () => stats,
   info: () => info,
   view: () => ({ ...view }),
-  pending: () => dirty,
+  pending: () => dirty || building || loading,
 };
 window.isoscope = api;
 
-function message(e) {
-  if (e instanceof WebAssembly.RuntimeError) {
-    // A trap: out of memory (a volume too large for the page) or a bug.
-    return `the page's wasm module stopped (${e.message}): most likely out of memory; reload the page`;
+// The worker, and the requests it has not answered, oldest first.
+const worker = new Worker(new URL('./worker.js', import.meta.url), { type: 'module' });
+const waiting = new Map();
+let nextId = 0;
+let progress = null;
+
+// Ask the worker to do `op`; a promise of its answer.
+function call(op, args = {}, transfer = []) {
+  const id = ++nextId;
+  return new Promise((resolve, reject) => {
+    waiting.set(id, { resolve, reject, start: performance.now() });
+    worker.postMessage({ id, op, ...args }, transfer);
+  });
+}
+
+worker.onmessage = (e) => {
+  const m = e.data;
+  if (m.progress) {
+    progress = m.progress;
+    return;
   }
+  const w = waiting.get(m.id);
+  if (!w) return;
+  waiting.delete(m.id);
+  if (progress && progress.id === m.id) progress = null;
+  if (m.ok) w.resolve(m.value);
+  else w.reject(new Error(m.error));
+};
+
+worker.onerror = (e) => {
+  e.preventDefault();
+  const err = new Error(`the page's worker failed: ${e.message || 'it could not start'}`);
+  for (const w of waiting.values()) w.reject(err);
+  waiting.clear();
+  showError(err);
+};
+
+// The oldest request's progress, once it has run BUSY_AFTER_MS.
+function showBusy(now) {
+  const first = waiting.entries().next().value;
+  const busy = $('busy');
+  if (!first || now - first[1].start < BUSY_AFTER_MS) {
+    busy.hidden = true;
+    return;
+  }
+  const [id, w] = first;
+  const p = progress && progress.id === id ? progress : null;
+  const bar = $('busy-bar');
+  const seconds = ((now - w.start) / 1000).toFixed(1);
+  if (p && p.total > 0) {
+    bar.value = Math.min(p.done / p.total, 1);
+    $('busy-label').textContent = `${p.label}: ${Math.min(100, Math.round((100 * p.done) / p.total))}% (${seconds} s)`;
+  } else {
+    bar.removeAttribute('value');
+    $('busy-label').textContent = `${p ? p.label : 'working'}… (${seconds} s)`;
+  }
+  busy.hidden = false;
+}
+
+function message(e) {
   return String(e && e.message !== undefined ? e.message : e);
 }
 
@@ -66,38 +135,50 @@ function planesValue() {
   return ['xy', 'xz', 'yz'].filter((p) => $(`plane-${p}`).checked).join(',');
 }
 
-// Give the Scope every setting of the controls.
-function applySettings() {
-  scope.set_view(view.yaw, view.pitch, view.zoom);
-  scope.set_planes(planesValue());
-  scope.set_every(Number.parseInt($('every').value, 10) || 0);
-  scope.set_board($('board').checked ? 'f407' : '');
+// Every setting of the controls, as the worker's `frame` takes them.
+function settings() {
+  return {
+    levels,
+    yaw: view.yaw,
+    pitch: view.pitch,
+    zoom: view.zoom,
+    planes: planesValue(),
+    every: Number.parseInt($('every').value, 10) || 0,
+    board: $('board').checked ? 'f407' : '',
+  };
 }
 
-// Build and draw the frame if anything changed.
-function redraw() {
-  if (!scope || !dirty) return;
+// Ask for the frame if anything changed, one frame at a time: changes made
+// while one is built go into the next.
+async function redraw() {
+  if (!dirty || building || loading) return;
   dirty = false;
+  building = true;
+  const t0 = performance.now();
   try {
-    applySettings();
-    if (scope.update()) {
-      const size = scope.size();
-      const rgba = new Uint8ClampedArray(scope.pixels().buffer);
-      $('screen').getContext('2d').putImageData(new ImageData(rgba, size, size), 0, 0);
+    const frame = await call('frame', { settings: settings() });
+    if (frame) {
+      const rgba = new Uint8ClampedArray(frame.pixels.buffer);
+      $('screen').getContext('2d').putImageData(new ImageData(rgba, frame.size, frame.size), 0, 0);
+      stats = { ...JSON.parse(frame.stats), pixels_ms: frame.pixelsMs };
+      api.frameMs = performance.now() - t0;
       api.frames += 1;
       showStats();
+      if (api.onframe) api.onframe(stats, api.frameMs);
     }
     clearError();
     api.ready = true;
   } catch (e) {
     showError(e);
+  } finally {
+    building = false;
   }
 }
 
 const fmt = (n) => Number(n).toLocaleString('en');
 
 function showStats() {
-  const s = JSON.parse(scope.stats());
+  const s = stats;
   if (!s) return;
   const lit = s.samples ? Math.round((100 * s.lit_samples) / s.samples) : 0;
   const rate = s.sample_rate_hz >= 1e6 ? `${s.sample_rate_hz / 1e6} MS/s` : `${s.sample_rate_hz / 1e3} kS/s`;
@@ -105,15 +186,16 @@ function showStats() {
     `${fmt(s.points)} points, ${fmt(s.polylines)} polylines · ${fmt(s.samples)} samples (${lit}% lit)`,
     `blanked travel ${(100 * s.blank_ratio).toFixed(1)}% of lit · refresh ${s.fps.toFixed(1)} Hz at ${rate}`,
     `${s.board === 'host' ? 'host memory' : `${s.board} board`} · every ${s.every} · ` +
-      `built in ${s.build_ms.toFixed(0)} ms, drawn in ${s.draw_ms.toFixed(0)} ms`,
+      `built in ${s.build_ms.toFixed(0)} ms, drawn in ${(s.draw_ms + s.pixels_ms).toFixed(0)} ms, ` +
+      `on the screen after ${api.frameMs.toFixed(0)} ms`,
     ...s.remarks,
   ];
   $('stats').textContent = lines.join('\n');
 }
 
 // The level slider over the volume's histogram, suggested levels marked.
-function showVolume() {
-  info = JSON.parse(scope.info());
+function showVolume(json) {
+  info = JSON.parse(json);
   $('volume-name').textContent = `${info.name}: ${info.dims.join('×')} ${info.dtype}`;
   const notes = $('notes');
   notes.replaceChildren(...info.notes.map((n) => Object.assign(document.createElement('li'), { textContent: n })));
@@ -129,7 +211,8 @@ function showVolume() {
     b.addEventListener('click', () => setLevels([l]));
     sugg.append(b, ' ');
   }
-  showLevel(info.default_levels);
+  levels = info.default_levels;
+  showLevel(levels);
 }
 
 function showLevel(levels) {
@@ -158,36 +241,65 @@ function drawHistogram(levels) {
   for (const l of levels) g.fillRect(x(l) - 0.5, 0, 1, c.height);
 }
 
-function setLevels(levels) {
-  scope.set_levels(Float32Array.from(levels));
+function setLevels(ls) {
+  levels = ls;
   $('level').value = levels[0];
   showLevel(levels);
   changed();
 }
 
-function loaded() {
-  showVolume();
-  clearError();
-  changed();
-}
-
-function loadDemo(spec) {
+// Load a volume in the worker (`op` with `args`), drawn at `at` if given
+// (else its default levels); the page keeps the old one if it fails.
+async function load(op, args, at = null) {
+  loading = true;
   try {
-    scope.load_demo(spec);
-    $('demo').value = spec;
-    loaded();
+    showVolume(await call(op, args));
+    if (at) setLevels(at);
+    clearError();
+    changed();
+    return true;
   } catch (e) {
     showError(e);
+    return false;
+  } finally {
+    loading = false;
   }
 }
 
+async function loadDemo(spec, at = null) {
+  if (await load('demo', { spec }, at)) $('demo').value = spec;
+}
+
 async function loadFile(file) {
-  $('stats').textContent = `reading ${file.name}…`;
+  if (await load('file', { file })) $('demo').value = '';
+}
+
+// The exports: the command line's files of the frame on the screen.
+const EXPORTS = {
+  png: ['image/png', '.png'],
+  samples: ['text/plain', '.samples.txt'],
+  svg: ['image/svg+xml', '.svg'],
+  wav: ['audio/wav', '.wav'],
+};
+
+// A file name for the volume: `hydrogen:32` as hydrogen-32, `head.nii.gz`
+// as head.
+function baseName() {
+  const name = info ? info.name.replace(/\.gz$/i, '').replace(/\.[a-z0-9]+$/i, '') : 'isoscope';
+  return name.replace(/[^A-Za-z0-9._-]+/g, '-') || 'isoscope';
+}
+
+async function exportFile(kind) {
+  const [type, ext] = EXPORTS[kind];
   try {
-    const bytes = new Uint8Array(await file.arrayBuffer());
-    scope.load_file(file.name, bytes);
-    $('demo').value = '';
-    loaded();
+    const data = await call('export', { kind });
+    const url = URL.createObjectURL(new Blob([data], { type }));
+    const a = Object.assign(document.createElement('a'), { href: url, download: baseName() + ext });
+    document.body.append(a);
+    a.click();
+    a.remove();
+    setTimeout(() => URL.revokeObjectURL(url), 60_000);
+    clearError();
   } catch (e) {
     showError(e);
   }
@@ -251,6 +363,9 @@ function wireControls() {
     Object.assign(view, DEFAULT_VIEW);
     changed();
   });
+  for (const kind of Object.keys(EXPORTS)) {
+    $(`export-${kind}`).addEventListener('click', () => exportFile(kind));
+  }
 }
 
 let last = null;
@@ -261,15 +376,16 @@ function tick(t) {
   }
   last = t;
   redraw();
+  showBusy(performance.now());
   requestAnimationFrame(tick);
 }
 
 async function main() {
-  await init();
   const size = Math.round(Math.max(64, Math.min(2048, param('size', 640))));
   $('screen').width = size;
   $('screen').height = size;
-  scope = new Scope(size);
+  requestAnimationFrame(tick);
+  await call('init', { size });
   view.yaw = param('yaw', view.yaw);
   view.pitch = param('pitch', view.pitch);
   view.zoom = param('zoom', view.zoom);
@@ -281,12 +397,8 @@ async function main() {
   $('board').checked = params.get('board') === 'f407';
   spinning = $('spin').checked = params.get('spin') === '1';
   wireControls();
-  loadDemo(params.get('demo') ?? 'hydrogen:32');
-  if (params.has('level')) {
-    setLevels(params.get('level').split(',').map(Number.parseFloat));
-  }
-  redraw();
-  requestAnimationFrame(tick);
+  const at = params.has('level') ? params.get('level').split(',').map(Number.parseFloat) : null;
+  await loadDemo(params.get('demo') ?? 'hydrogen:32', at);
 }
 
 main().catch(showError);

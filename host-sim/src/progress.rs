@@ -1,9 +1,15 @@
-//! Progress for long work, on standard error, only when it is a terminal.
+//! Progress for long work, on standard error, only when it is a terminal,
+//! or to a function (the web app's worker posts it to the page).
 
 use std::io::{IsTerminal, Write};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
+
+/// A function told of each unit finished: the label, the units done and
+/// the total. It is called on the thread that finished the unit, as often
+/// as units finish: it keeps its own pace.
+pub type Hook = fn(&'static str, usize, usize);
 
 /// A shared counter that redraws one status line at most ten times a second.
 #[derive(Debug)]
@@ -13,6 +19,7 @@ pub struct Progress {
     done: AtomicUsize,
     last: Mutex<Option<Instant>>,
     enabled: bool,
+    hook: Option<Hook>,
 }
 
 impl Progress {
@@ -23,7 +30,12 @@ impl Progress {
 
     /// As [`Progress::new`], shown or not as `enabled` says.
     pub fn with_output(label: &'static str, total: usize, enabled: bool) -> Self {
-        Self { label, total, done: AtomicUsize::new(0), last: Mutex::new(None), enabled }
+        Self { label, total, done: AtomicUsize::new(0), last: Mutex::new(None), enabled, hook: None }
+    }
+
+    /// Progress over `total` units told to `hook` (and not shown).
+    pub fn with_hook(label: &'static str, total: usize, hook: Hook) -> Self {
+        Self { hook: Some(hook), ..Self::with_output(label, total, false) }
     }
 
     /// Units finished so far.
@@ -44,6 +56,9 @@ impl Progress {
     /// `n` more units finished.
     pub fn add(&self, n: usize) {
         let done = self.done.fetch_add(n, Ordering::Relaxed).saturating_add(n);
+        if let Some(hook) = self.hook {
+            hook(self.label, done, self.total);
+        }
         if !self.enabled || n == 0 {
             return;
         }
@@ -104,5 +119,21 @@ mod tests {
         assert_eq!(p.done(), 0);
         (0..10).for_each(|_| p.inc());
         assert_eq!(p.done(), 10);
+    }
+
+    static SEEN: AtomicUsize = AtomicUsize::new(0);
+
+    fn hook(label: &'static str, done: usize, total: usize) {
+        assert_eq!((label, total), ("work", 3));
+        SEEN.store(done, Ordering::Relaxed);
+    }
+
+    #[test]
+    fn a_hook_is_told_each_unit() {
+        let p = Progress::with_hook("work", 3, hook);
+        p.inc();
+        p.inc();
+        assert_eq!(SEEN.load(Ordering::Relaxed), 2);
+        assert_eq!(p.done(), 2);
     }
 }

@@ -177,13 +177,19 @@ pub struct Scene {
     pub values: Option<crate::info::Summary>,
 }
 
-/// The memory to start with for `vol` under `memory`.
-fn first_capacity(vol: &WireVolume, memory: Memory) -> Capacity {
+/// The memory to start with for `vol` under `memory`: on the host, the
+/// largest size it grows through ([`HOST_START_POINTS`] times a power of
+/// four) of at most `points` points, and at least the first.
+fn first_capacity(vol: &WireVolume, memory: Memory, points: usize) -> Capacity {
     match memory {
         Memory::Board(b) => b.capacity,
         Memory::Host => {
             let extent = usize::from(vol.dims[0].max(vol.dims[1])).max(2);
-            host_capacity(vol.slice_bytes().max(64), extent, HOST_START_POINTS)
+            let mut start = HOST_START_POINTS;
+            while start * 4 <= points.min(HOST_MAX_POINTS) {
+                start *= 4;
+            }
+            host_capacity(vol.slice_bytes().max(64), extent, start)
         }
     }
 }
@@ -201,9 +207,38 @@ pub fn with_board<R>(
     progress: Option<&Progress>,
     f: impl FnOnce(&mut InProcess<'_>, Capacity) -> Result<R>,
 ) -> Result<R> {
+    with_board_from(vol, cfg, HOST_START_POINTS, progress, f)
+}
+
+/// As [`with_board`], with the host's memory starting at `points` points
+/// (rounded down to a size it grows through: [`HOST_START_POINTS`] times a
+/// power of four, at most [`HOST_MAX_POINTS`]) rather than at the first.
+///
+/// Give it the [`Scene::capacity`] a frame of the same volume, levels,
+/// planes, stride and beam's bits needed at another view, and the surface
+/// is contoured once rather than again at each size on the way: a view
+/// that turns a large surface saves the passes that did not fit. The frame
+/// is [`with_board`]'s then, because whether a surface fits does not
+/// depend on the view (its pieces are culled, stitched, merged and ordered
+/// in space, with the merge tolerance of the bounding sphere's fit, the
+/// same from every side), so [`with_board`] would grow to that size too,
+/// and a board of one size draws one picture. (Not so after a change of
+/// levels, planes or stride: a surface that fits a smaller size may be
+/// drawn differently in a larger one, whose order pass has more scratch.) With
+/// a board's memory `points` is not used.
+///
+/// # Errors
+/// As [`with_board`].
+pub fn with_board_from<R>(
+    vol: &WireVolume,
+    cfg: &SceneConfig,
+    points: usize,
+    progress: Option<&Progress>,
+    f: impl FnOnce(&mut InProcess<'_>, Capacity) -> Result<R>,
+) -> Result<R> {
     let send = cfg.send()?;
     cfg.beam.validate().context("invalid beam settings")?;
-    let mut capacity = first_capacity(vol, cfg.memory);
+    let mut capacity = first_capacity(vol, cfg.memory, points);
     loop {
         let mut mem = HostBuffers::new(&capacity);
         let mut board = InProcess::new(&mut mem, cfg.engine())?;
@@ -573,7 +608,7 @@ pub fn render(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::volume::{Dims, Samples};
+    use crate::volume::{Dims, LoadedVolume, Samples};
     use isoscope_core::demo::Demo;
 
     fn demo(d: Demo, n: usize) -> WireVolume {
@@ -597,5 +632,25 @@ mod tests {
         .unwrap();
         assert!(scene.capacity.points > HOST_START_POINTS, "the memory did not grow: {:?}", scene.capacity);
         assert_eq!(progress.done(), progress.total());
+    }
+
+    #[test]
+    fn starting_at_the_size_another_view_needed_draws_the_same_frame() {
+        // gyroid:32 needs 262,144 points: contoured twice from the start.
+        let vol =
+            WireVolume::from_loaded(&LoadedVolume::demo("gyroid:32".parse().unwrap()).unwrap()).unwrap();
+        let cfg = SceneConfig { levels: vec![0.0], ..SceneConfig::default() };
+        let first = build(&vol, &cfg).unwrap();
+        assert_eq!(first.capacity.points, 4 * HOST_START_POINTS);
+        let turned = SceneConfig { view: View { yaw: 75.0, pitch: -20.0, ..cfg.view }, ..cfg };
+        let want = build(&vol, &turned).unwrap();
+        // A size between two is rounded down to the smaller.
+        for points in [first.capacity.points, first.capacity.points + 1] {
+            let got = with_board_from(&vol, &turned, points, None, |b, c| Ok(scene_of(b, &vol, c, &turned)))
+                .unwrap();
+            assert_eq!(got.capacity, want.capacity);
+            assert_eq!(got.samples, want.samples);
+            assert_eq!(got.commands, want.commands);
+        }
     }
 }

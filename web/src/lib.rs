@@ -8,6 +8,16 @@
 //! same phosphor model ([`Phosphor`]). This crate holds the page's state
 //! (the volume, the settings, the last frame and picture) and turns it into
 //! values JavaScript takes: RGBA pixels, the samples as text, and JSON.
+//! Its exports are the command line's files, made by the same functions:
+//! `render`'s PNG ([`Phosphor::encode_png`]), `render --samples`'s text
+//! ([`scene::samples_text`]), `contour --format svg`'s SVG
+//! ([`isoscope_sim::svg::write_svg`]) and `wav`'s WAV
+//! ([`isoscope_sim::wav::write_wav`], with its defaults).
+//!
+//! The page runs it in a Web Worker (`web/worker.js`), so that loading a
+//! volume and building a frame never hold up the page; long work is told
+//! to the worker's global `isoscopeProgress(label, done, total)` function
+//! if it has one (`total` 0: a step with no count).
 //!
 //! Every method that can fail returns a JavaScript error with the message
 //! the command line would print; none panics on bad input.
@@ -17,12 +27,15 @@ use isoscope_core::beam::BeamConfig;
 use isoscope_core::contour::grid::Plane;
 use isoscope_core::engine::Board;
 use isoscope_core::view::View;
+use isoscope_sim::board::frames_for;
 use isoscope_sim::formats::Options;
 use isoscope_sim::info::{LEVEL_BINS, Summary, summarize};
 use isoscope_sim::link::WireVolume;
 use isoscope_sim::phosphor::{Phosphor, PhosphorConfig};
+use isoscope_sim::progress::Progress;
 use isoscope_sim::scene::{self, Scene, SceneConfig};
 use isoscope_sim::volume::{DemoSpec, LoadedVolume};
+use isoscope_sim::wav::{WavConfig, audio_beam, write_wav};
 use std::fmt::Write as _;
 use wasm_bindgen::prelude::*;
 
@@ -65,15 +78,60 @@ pub struct Scope {
     board: Option<Board>,
     /// The frame of the settings, `None` when they changed since.
     scene: Option<Scene>,
+    /// The host memory, in points, the last frame's surface needed, and
+    /// the settings it was for: a frame that differs only in its view
+    /// starts there ([`scene::with_board_from`]).
+    fit: Option<(Fit, usize)>,
     /// Milliseconds the last frame took to build and draw.
     build_ms: f64,
     draw_ms: f64,
     screen: Phosphor,
 }
 
+/// What decides whether a surface fits a memory: every setting but the
+/// view.
+#[derive(Debug, Clone, PartialEq)]
+struct Fit {
+    levels: Vec<f32>,
+    planes: Vec<Plane>,
+    every: usize,
+    board: Option<Board>,
+}
+
 /// An `anyhow` error, its causes included, as a JavaScript error.
 fn js(e: anyhow::Error) -> JsError {
     JsError::new(&format!("{e:#}"))
+}
+
+#[cfg(target_arch = "wasm32")]
+#[wasm_bindgen]
+extern "C" {
+    /// The worker's progress function (`catch`: an error, e.g. none
+    /// defined, comes back as a value, not through the module's frames).
+    #[wasm_bindgen(catch, js_name = isoscopeProgress)]
+    fn progress_js(label: &str, done: usize, total: usize) -> Result<(), JsValue>;
+}
+
+/// Tell the page how long work goes: `label`, `done` of `total` units (0
+/// of 0: a step with no count). Nothing off wasm32 or with no
+/// `isoscopeProgress` in the global scope.
+fn report(label: &'static str, done: usize, total: usize) {
+    #[cfg(target_arch = "wasm32")]
+    let _ = progress_js(label, done, total);
+    #[cfg(not(target_arch = "wasm32"))]
+    let _ = (label, done, total);
+}
+
+/// [`report`] for the frames fed to the board: after the last one the
+/// board stitches and orders the surface, which takes a while of its own
+/// on a large volume. (On the host the memory may grow and the volume be
+/// fed again: counted again from 0.)
+fn report_feeding(label: &'static str, done: usize, total: usize) {
+    match done.checked_rem(total) {
+        Some(0) => report("stitching and ordering the surface", 0, 0),
+        Some(n) => report(label, n, total),
+        None => report(label, done, total),
+    }
 }
 
 #[wasm_bindgen]
@@ -194,6 +252,32 @@ impl Scope {
         self.scene.as_ref().map_or_else(String::new, |s| scene::samples_text(&s.samples))
     }
 
+    /// The picture as `render` writes it: an 8-bit RGB PNG file.
+    ///
+    /// # Errors
+    /// No frame drawn for the settings.
+    pub fn png(&self) -> Result<Vec<u8>, JsError> {
+        self.png_bytes().map_err(js)
+    }
+
+    /// The frame's drawing commands as `contour --format svg` writes them.
+    ///
+    /// # Errors
+    /// No frame drawn for the settings.
+    pub fn svg(&self) -> Result<Vec<u8>, JsError> {
+        self.svg_bytes().map_err(js)
+    }
+
+    /// The frame as `isoscope-sim wav` writes it with its defaults: drawn
+    /// again with the beam made for a 48 kHz sound card
+    /// ([`audio_beam`]), five seconds of it, stereo 16-bit PCM.
+    ///
+    /// # Errors
+    /// No frame drawn for the settings.
+    pub fn wav(&self) -> Result<Vec<u8>, JsError> {
+        self.wav_bytes().map_err(js)
+    }
+
     /// The volume as JSON: `name`, `dims`, `dtype`, `range` (or null),
     /// `histogram`, `suggested` and `default_levels`, and the readers'
     /// `notes`; `null` with no volume.
@@ -253,6 +337,7 @@ impl Scope {
             zoom: DEFAULT_ZOOM,
             board: None,
             scene: None,
+            fit: None,
             build_ms: 0.0,
             draw_ms: 0.0,
             screen,
@@ -270,13 +355,15 @@ impl Scope {
                 MAX_VOLUME_BYTES >> 20
             );
         }
+        report("making the demo", 0, 0);
         let vol = LoadedVolume::demo(spec)?;
         let name = format!("{}:{}", spec.demo.name(), spec.n);
-        self.set_volume(name, &vol, vec![spec.demo.default_level()], Vec::new())
+        self.set_volume(name, &vol, Some(vec![spec.demo.default_level()]), Vec::new())
     }
 
     fn file(&mut self, name: &str, bytes: &[u8]) -> Result<()> {
         let opts = Options { index: 0, max_bytes: MAX_VOLUME_BYTES, ..Options::default() };
+        report("reading the file", 0, 0);
         let Some((vol, notes)) = LoadedVolume::read_known_bytes(name, bytes, &opts)? else {
             bail!(
                 "{name}: not a volume file the page knows by its name or first bytes \
@@ -284,26 +371,34 @@ impl Scope {
                  raw files need isoscope-sim's --dims and --dtype)"
             );
         };
-        // The level `render` draws a file at: the first suggested over
-        // `LEVEL_BINS` bins, as in the summary the page shows.
-        let Some(&level) = summarize(&vol, LEVEL_BINS).suggested.first() else {
-            bail!("{name}: its values suggest no level to draw (it is constant or empty)");
-        };
-        self.set_volume(name.to_string(), &vol, vec![level], notes)
+        self.set_volume(name.to_string(), &vol, None, notes)
     }
 
+    /// Make `vol` the volume, drawn at `levels`, or for a file (`None`)
+    /// at the level `render` draws it at: the first suggested over
+    /// `LEVEL_BINS` bins, as in the summary the page shows.
     fn set_volume(
         &mut self,
         name: String,
         vol: &LoadedVolume,
-        levels: Vec<f32>,
+        levels: Option<Vec<f32>>,
         notes: Vec<String>,
     ) -> Result<()> {
-        let wire = WireVolume::from_loaded(vol)?;
+        report("summarizing the volume", 0, 0);
         let summary = summarize(vol, LEVEL_BINS);
+        let levels = match levels {
+            Some(l) => l,
+            None => match summary.suggested.first() {
+                Some(&l) => vec![l],
+                None => bail!("{name}: its values suggest no level to draw (it is constant or empty)"),
+            },
+        };
+        report("preparing the volume for the board", 0, 0);
+        let wire = WireVolume::from_loaded(vol)?;
         self.levels.clone_from(&levels);
         self.volume = Some(Volume { name, wire, summary, default_levels: levels, notes });
         self.scene = None;
+        self.fit = None;
         Ok(())
     }
 
@@ -332,17 +427,72 @@ impl Scope {
         SceneConfig { planes: self.planes.clone(), every, view, beam, ..base }
     }
 
+    /// The frame of `cfg`, as [`scene::build`] makes it, its progress
+    /// told to the page. On the host's memory it starts at the size the
+    /// last frame needed if only the view changed since
+    /// ([`scene::with_board_from`]: the same frame, without contouring the
+    /// surface again at the sizes that did not fit).
+    fn build(&self, vol: &Volume, cfg: &SceneConfig) -> Result<Scene> {
+        let points = match &self.fit {
+            Some((fit, points)) if *fit == self.fit_key() => *points,
+            _ => scene::HOST_START_POINTS,
+        };
+        let progress = Progress::with_hook("contouring", frames_for(&vol.wire, &cfg.send()?), report_feeding);
+        scene::with_board_from(&vol.wire, cfg, points, Some(&progress), |board, capacity| {
+            Ok(scene::scene_of(board, &vol.wire, capacity, cfg))
+        })
+    }
+
+    fn fit_key(&self) -> Fit {
+        Fit { levels: self.levels.clone(), planes: self.planes.clone(), every: self.every, board: self.board }
+    }
+
+    /// The frame on the screen, if it is of the settings.
+    fn shown(&self) -> Result<&Scene> {
+        self.scene.as_ref().context("no frame drawn for these settings: nothing to export")
+    }
+
+    fn png_bytes(&self) -> Result<Vec<u8>> {
+        self.shown()?;
+        Ok(self.screen.encode_png())
+    }
+
+    fn svg_bytes(&self) -> Result<Vec<u8>> {
+        let scene = self.shown()?;
+        let vol = self.volume.as_ref().context("no volume loaded")?;
+        let mut out = Vec::new();
+        isoscope_sim::svg::write_svg(&mut out, &scene.commands, self.config(vol).view.bits)?;
+        Ok(out)
+    }
+
+    fn wav_bytes(&self) -> Result<Vec<u8>> {
+        self.shown()?;
+        let vol = self.volume.as_ref().context("no volume loaded")?;
+        let cfg = self.config(vol);
+        // `wav`'s defaults: its --audio-rate and --seconds are
+        // `WavConfig`'s, its beam is made for that rate.
+        let wav = WavConfig { bits: cfg.view.bits, ..WavConfig::default() };
+        let cfg = SceneConfig { beam: audio_beam(wav.rate_hz, cfg.view.bits), ..cfg };
+        let built = self.build(vol, &cfg)?;
+        report("writing the WAV file", 0, 0);
+        let mut out = std::io::Cursor::new(Vec::new());
+        write_wav(&mut out, &built.samples, &wav)?;
+        Ok(out.into_inner())
+    }
+
     fn redraw(&mut self) -> Result<()> {
         let vol = self.volume.as_ref().context("no volume loaded")?;
         let cfg = self.config(vol);
         let t0 = web_time::Instant::now();
-        let built = scene::build(&vol.wire, &cfg)?;
+        let built = self.build(vol, &cfg)?;
         let t1 = web_time::Instant::now();
+        report("drawing the picture", 0, 0);
         // A frame on a dark screen, as `render` draws it (one refresh).
         self.screen.clear();
         scene::refresh(&mut self.screen, &built, 1, None);
         self.build_ms = (t1 - t0).as_secs_f64() * 1e3;
         self.draw_ms = t1.elapsed().as_secs_f64() * 1e3;
+        self.fit = Some((self.fit_key(), built.capacity.points));
         self.scene = Some(built);
         Ok(())
     }
@@ -430,6 +580,48 @@ mod tests {
         assert_eq!(s.scene.as_ref().unwrap().samples, want.samples);
         assert_eq!(s.pixels().len(), 64 * 64 * 4);
         assert!(s.stats().contains("\"points\":"));
+    }
+
+    #[test]
+    fn the_exports_are_the_command_lines_files() {
+        let mut s = Scope::with_size(64).unwrap();
+        s.demo("torus:12").unwrap();
+        assert!(s.png_bytes().is_err() && s.svg_bytes().is_err() && s.wav_bytes().is_err(), "no frame yet");
+        s.redraw().unwrap();
+        let spec: DemoSpec = "torus:12".parse().unwrap();
+        let vol = WireVolume::from_loaded(&LoadedVolume::demo(spec).unwrap()).unwrap();
+        let cfg = SceneConfig { levels: vec![spec.demo.default_level()], ..SceneConfig::default() };
+        let want = scene::build(&vol, &cfg).unwrap();
+        let screen = scene::render(&want, PhosphorConfig::with_size(64, 64), 1, None).unwrap();
+        assert_eq!(s.png_bytes().unwrap(), screen.encode_png());
+        let mut svg = Vec::new();
+        isoscope_sim::svg::write_svg(&mut svg, &want.commands, 12).unwrap();
+        assert_eq!(s.svg_bytes().unwrap(), svg);
+        let audio = scene::build(&vol, &SceneConfig { beam: audio_beam(48_000, 12), ..cfg }).unwrap();
+        let mut wav = std::io::Cursor::new(Vec::new());
+        write_wav(&mut wav, &audio.samples, &WavConfig::default()).unwrap();
+        assert_eq!(s.wav_bytes().unwrap(), wav.into_inner());
+        // A change of settings not drawn yet: nothing to export.
+        s.set_levels(vec![0.5]);
+        assert!(s.png_bytes().is_err());
+    }
+
+    #[test]
+    fn a_turn_draws_what_render_draws_from_the_size_that_fit() {
+        // gyroid:32 needs 262,144 points, four times the host's start.
+        let mut s = Scope::with_size(64).unwrap();
+        s.demo("gyroid:32").unwrap();
+        s.redraw().unwrap();
+        assert_eq!(s.fit.as_ref().unwrap().1, 4 * scene::HOST_START_POINTS);
+        s.set_view(75.0, -20.0, 0.8);
+        s.redraw().unwrap();
+        let vol =
+            WireVolume::from_loaded(&LoadedVolume::demo("gyroid:32".parse().unwrap()).unwrap()).unwrap();
+        let cfg = s.config(s.volume.as_ref().unwrap());
+        assert_eq!(s.scene.as_ref().unwrap().samples, scene::build(&vol, &cfg).unwrap().samples);
+        // Another level starts again from the host's first size.
+        s.set_levels(vec![0.5]);
+        assert_ne!(s.fit.as_ref().unwrap().0, s.fit_key());
     }
 
     #[test]

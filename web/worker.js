@@ -1,0 +1,107 @@
+// The page's worker: the wasm Scope (web/src/lib.rs) off the page's
+// thread, so that reading a volume and building a frame, which can take
+// seconds, never hold up the page. app.js sends it requests, one at a time
+// in the order sent: { id, op, ...arguments }; it answers each with
+// { id, ok: true, value } or { id, ok: false, error }, and while one runs
+// sends { progress: { id, label, done, total } } (total 0: a step with no
+// count) when the step changes and at most every PROGRESS_MS otherwise.
+
+import init, { Scope } from './isoscope_web.js';
+
+const PROGRESS_MS = 100;
+
+let scope = null;
+// The request running, and what the page was last told of it.
+let job = null;
+
+// Called by the Scope during long work (lib.rs's `report`).
+self.isoscopeProgress = (label, done, total) => {
+  if (!job) return;
+  const now = performance.now();
+  if (label === job.label && now - job.posted < PROGRESS_MS) return;
+  job.label = label;
+  job.posted = now;
+  self.postMessage({ progress: { id: job.id, label, done, total } });
+};
+
+// A request's answer: a value, and the buffers handed over with it.
+const answer = (value, transfer = []) => ({ value, transfer });
+const bytes = (u8) => answer(u8, [u8.buffer]);
+
+const ops = {
+  async init({ size }) {
+    await init();
+    scope = new Scope(size);
+    return answer(null);
+  },
+  demo({ spec }) {
+    scope.load_demo(spec);
+    return answer(scope.info());
+  },
+  async file({ file }) {
+    self.isoscopeProgress('reading the file', 0, 0);
+    const data = new Uint8Array(await file.arrayBuffer());
+    scope.load_file(file.name, data);
+    return answer(scope.info());
+  },
+  // Apply the page's settings; build and draw the frame if they changed
+  // (null if not).
+  frame({ settings: s }) {
+    scope.set_levels(Float32Array.from(s.levels));
+    scope.set_view(s.yaw, s.pitch, s.zoom);
+    scope.set_planes(s.planes);
+    scope.set_every(s.every);
+    scope.set_board(s.board);
+    if (!scope.update()) return answer(null);
+    const t0 = performance.now();
+    const pixels = scope.pixels();
+    const pixelsMs = performance.now() - t0;
+    return answer({ size: scope.size(), pixels, pixelsMs, stats: scope.stats() }, [pixels.buffer]);
+  },
+  samples() {
+    return answer(scope.samples_text());
+  },
+  export({ kind }) {
+    switch (kind) {
+      case 'png':
+        return bytes(scope.png());
+      case 'samples':
+        return bytes(new TextEncoder().encode(scope.samples_text()));
+      case 'svg':
+        return bytes(scope.svg());
+      case 'wav':
+        return bytes(scope.wav());
+      default:
+        throw new Error(`no export called ${kind}`);
+    }
+  },
+};
+
+function message(e) {
+  if (e instanceof WebAssembly.RuntimeError) {
+    // A trap: out of memory (a volume too large for the page) or a bug.
+    return `the page's wasm module stopped (${e.message}): most likely out of memory; reload the page`;
+  }
+  return String(e && e.message !== undefined ? e.message : e);
+}
+
+async function run(req) {
+  job = { id: req.id, label: null, posted: 0 };
+  try {
+    if (!scope && req.op !== 'init') throw new Error('the worker has no Scope yet');
+    const op = ops[req.op];
+    if (!op) throw new Error(`the worker has no request ${req.op}`);
+    const { value, transfer } = await op(req);
+    self.postMessage({ id: req.id, ok: true, value }, transfer);
+  } catch (e) {
+    self.postMessage({ id: req.id, ok: false, error: message(e) });
+  } finally {
+    job = null;
+  }
+}
+
+// One request at a time, in order, even across a request's awaits.
+let queue = Promise.resolve();
+self.onmessage = (e) => {
+  queue = queue.then(() => run(e.data));
+};
