@@ -512,6 +512,28 @@ pub fn fit_to_board(vol: LoadedVolume, opts: &FitOptions, limits: &Limits, draw:
     fit_drawing(vol, opts, Some((limits, Some(draw))))
 }
 
+/// [`fit_to_board`] for a board whose picture the scene of `cfg` is (the
+/// engine with the board's memory, [`crate::scene::build`]), at the stride
+/// `every` gives for a volume's dims: what `send`, `render --board` and the
+/// web page's board preset put on a board.
+///
+/// # Errors
+/// As [`fit_to_board`], and a scene the board refuses.
+pub fn fit_to_board_picture(
+    vol: LoadedVolume,
+    opts: &FitOptions,
+    limits: &Limits,
+    cfg: &crate::scene::SceneConfig,
+    every: impl Fn(Dims) -> usize,
+) -> Result<Fitted> {
+    let mut draw = |v: &LoadedVolume| -> Result<Drawn> {
+        let cfg = crate::scene::SceneConfig { every: every(v.dims), ..cfg.clone() };
+        let loaded = crate::scene::build(&crate::link::WireVolume::from_loaded(v)?, &cfg)?.loaded;
+        Ok(Drawn { every: usize::from(loaded.every), dropped: loaded.dropped > 0 || loaded.cut > 0 })
+    };
+    fit_to_board(vol, opts, limits, (1, &mut draw))
+}
+
 fn fit_drawing(
     vol: LoadedVolume,
     opts: &FitOptions,

@@ -382,10 +382,10 @@ fn fit_volume(
     Ok(fitted.volume)
 }
 
-/// Fit `vol` as `args` say to a board of `limits`, whose picture `cfg` makes (the
-/// stride `every` gives for a volume's dims): with neither --crop nor
-/// --downsample, at the downsample the board draws most of
-/// ([`isoscope_sim::fit::fit_to_board`]); the notes on standard error.
+/// Fit `vol` as `args` say to a board of `limits`, whose picture `cfg`
+/// makes (the stride `every` gives for a volume's dims)
+/// ([`isoscope_sim::fit::fit_to_board_picture`]); the notes on standard
+/// error.
 fn fit_board_volume(
     vol: LoadedVolume,
     args: &FitArgs,
@@ -393,13 +393,7 @@ fn fit_board_volume(
     cfg: &SceneConfig,
     every: impl Fn(isoscope_sim::volume::Dims) -> usize,
 ) -> Result<LoadedVolume> {
-    use isoscope_sim::fit::Drawn;
-    let mut draw = |v: &LoadedVolume| -> Result<Drawn> {
-        let cfg = SceneConfig { every: every(v.dims), ..cfg.clone() };
-        let loaded = scene::build(&WireVolume::from_loaded(v)?, &cfg)?.loaded;
-        Ok(Drawn { every: usize::from(loaded.every), dropped: loaded.dropped > 0 || loaded.cut > 0 })
-    };
-    let fitted = isoscope_sim::fit::fit_to_board(vol, &args.options(), limits, (1, &mut draw))?;
+    let fitted = isoscope_sim::fit::fit_to_board_picture(vol, &args.options(), limits, cfg, every)?;
     for n in &fitted.notes {
         eprintln!("isoscope-sim: note: {n}");
     }

@@ -28,13 +28,14 @@ use isoscope_core::contour::grid::Plane;
 use isoscope_core::engine::Board;
 use isoscope_core::view::View;
 use isoscope_sim::board::frames_for;
+use isoscope_sim::fit::{self, FitOptions, Limits};
 use isoscope_sim::formats::Options;
 use isoscope_sim::info::{LEVEL_BINS, Summary, summarize};
 use isoscope_sim::link::WireVolume;
 use isoscope_sim::phosphor::{Phosphor, PhosphorConfig};
 use isoscope_sim::progress::Progress;
 use isoscope_sim::scene::{self, Scene, SceneConfig};
-use isoscope_sim::volume::{DemoSpec, LoadedVolume};
+use isoscope_sim::volume::{DemoSpec, Dims, LoadedVolume};
 use isoscope_sim::wav::{WavConfig, audio_beam, write_wav};
 use std::fmt::Write as _;
 use wasm_bindgen::prelude::*;
@@ -54,6 +55,8 @@ const MAX_SIZE: u32 = 2048;
 struct Volume {
     /// Its name: the file's, or the demo's `NAME:N`.
     name: String,
+    /// As read, to fit to a board ([`Scope::board_volume`]).
+    loaded: LoadedVolume,
     wire: WireVolume,
     summary: Summary,
     /// The levels it is drawn at first: a demo's own, or the first level
@@ -82,6 +85,9 @@ pub struct Scope {
     /// the settings it was for: a frame that differs only in its view
     /// starts there ([`scene::with_board_from`]).
     fit: Option<(Fit, usize)>,
+    /// The volume fitted to the board preset (as `render --board` fits
+    /// it), the settings it was fitted for, and the notes on it.
+    fitted: Option<(Fit, WireVolume, Vec<String>)>,
     /// Milliseconds the last frame took to build and draw.
     build_ms: f64,
     draw_ms: f64,
@@ -313,7 +319,11 @@ impl Scope {
         o.raw("sample_rate_hz", &sc.sample_rate_hz.to_string());
         o.raw("every", &sc.loaded.every.to_string());
         o.str("board", sc.board.map_or("host", |b| b.name));
-        o.raw("remarks", &list(sc.remarks().iter().map(|r| quote(r))));
+        let fitted = match (&self.board, &self.fitted) {
+            (Some(_), Some((_, _, notes))) => notes.iter().map(|n| format!("note: {n}")).collect(),
+            _ => Vec::new(),
+        };
+        o.raw("remarks", &list(fitted.iter().chain(&sc.remarks()).map(|r| quote(r))));
         o.raw("build_ms", &format!("{:.3}", self.build_ms));
         o.raw("draw_ms", &format!("{:.3}", self.draw_ms));
         o.end()
@@ -338,6 +348,7 @@ impl Scope {
             board: None,
             scene: None,
             fit: None,
+            fitted: None,
             build_ms: 0.0,
             draw_ms: 0.0,
             screen,
@@ -396,33 +407,73 @@ impl Scope {
         report("preparing the volume for the board", 0, 0);
         let wire = WireVolume::from_loaded(vol)?;
         self.levels.clone_from(&levels);
-        self.volume = Some(Volume { name, wire, summary, default_levels: levels, notes });
+        self.volume =
+            Some(Volume { name, loaded: vol.clone(), wire, summary, default_levels: levels, notes });
         self.scene = None;
         self.fit = None;
+        self.fitted = None;
         Ok(())
     }
 
-    /// The scene configuration, as `render` makes it from its flags.
-    fn config(&self, vol: &Volume) -> SceneConfig {
+    /// The stride drawn of a volume of `dims`: the one asked for, or
+    /// `render`'s default for it.
+    fn every_for(&self, dims: Dims) -> usize {
+        match self.every {
+            0 => scene::auto_every(dims),
+            n => n,
+        }
+    }
+
+    /// With the board preset, the volume fitted to the board as `render
+    /// --board` fits it (`fit::fit_to_board_picture`, once for the
+    /// settings it depends on); else the volume as read.
+    fn board_volume(&mut self) -> Result<()> {
+        let (Some(board), Some(vol)) = (self.board, self.volume.as_ref()) else { return Ok(()) };
+        let key = self.fit_key();
+        if self.fitted.as_ref().is_some_and(|(k, _, _)| *k == key) {
+            return Ok(());
+        }
+        report("fitting the volume to the board", 0, 0);
+        let cfg =
+            SceneConfig { planes: self.planes.clone(), ..SceneConfig::board(board, self.levels.clone()) };
+        let limits = Limits::of_board(&board);
+        let fitted =
+            fit::fit_to_board_picture(vol.loaded.clone(), &FitOptions::default(), &limits, &cfg, |d| {
+                self.every_for(d)
+            })?;
+        let wire = WireVolume::from_loaded(&fitted.volume)?;
+        self.fitted = Some((key, wire, fitted.notes));
+        Ok(())
+    }
+
+    /// The volume the frame is of: fitted to the board preset
+    /// ([`Scope::board_volume`]), or as read.
+    fn wire(&self) -> Result<&WireVolume> {
+        let vol = self.volume.as_ref().context("no volume loaded")?;
+        match (self.board, &self.fitted) {
+            (None, _) => Ok(&vol.wire),
+            (Some(_), Some((key, wire, _))) if *key == self.fit_key() => Ok(wire),
+            (Some(_), _) => bail!("the volume is not yet fitted to the board"),
+        }
+    }
+
+    /// The scene configuration of `wire`, as `render` makes it from its
+    /// flags.
+    fn config(&self, wire: &WireVolume) -> SceneConfig {
         let view = View {
             yaw: self.yaw,
             pitch: self.pitch,
             // In f64, so that a zoom of 0.9 is render's margin of 0.05.
             margin: ((1.0 - self.zoom) / 2.0) as f32,
-            spacing: vol.wire.spacing,
+            spacing: wire.spacing,
             ..View::DEFAULT
         };
         let base = match self.board {
             Some(b) => SceneConfig::board(b, self.levels.clone()),
             None => SceneConfig { levels: self.levels.clone(), ..SceneConfig::default() },
         };
-        let every = match self.every {
-            0 => {
-                let [nx, ny, nz] = vol.wire.dims;
-                scene::auto_every(isoscope_sim::volume::Dims(nx.into(), ny.into(), nz.into()))
-            }
-            n => n,
-        };
+        let [nx, ny, nz] = wire.dims;
+        let every = self.every_for(Dims(nx.into(), ny.into(), nz.into()));
         let beam = BeamConfig { bits: view.bits, ..BeamConfig::default() };
         SceneConfig { planes: self.planes.clone(), every, view, beam, ..base }
     }
@@ -432,14 +483,14 @@ impl Scope {
     /// last frame needed if only the view changed since
     /// ([`scene::with_board_from`]: the same frame, without contouring the
     /// surface again at the sizes that did not fit).
-    fn build(&self, vol: &Volume, cfg: &SceneConfig) -> Result<Scene> {
+    fn build(&self, wire: &WireVolume, cfg: &SceneConfig) -> Result<Scene> {
         let points = match &self.fit {
             Some((fit, points)) if *fit == self.fit_key() => *points,
             _ => scene::HOST_START_POINTS,
         };
-        let progress = Progress::with_hook("contouring", frames_for(&vol.wire, &cfg.send()?), report_feeding);
-        scene::with_board_from(&vol.wire, cfg, points, Some(&progress), |board, capacity| {
-            Ok(scene::scene_of(board, &vol.wire, capacity, cfg))
+        let progress = Progress::with_hook("contouring", frames_for(wire, &cfg.send()?), report_feeding);
+        scene::with_board_from(wire, cfg, points, Some(&progress), |board, capacity| {
+            Ok(scene::scene_of(board, wire, capacity, cfg))
         })
     }
 
@@ -459,21 +510,20 @@ impl Scope {
 
     fn svg_bytes(&self) -> Result<Vec<u8>> {
         let scene = self.shown()?;
-        let vol = self.volume.as_ref().context("no volume loaded")?;
         let mut out = Vec::new();
-        isoscope_sim::svg::write_svg(&mut out, &scene.commands, self.config(vol).view.bits)?;
+        isoscope_sim::svg::write_svg(&mut out, &scene.commands, self.config(self.wire()?).view.bits)?;
         Ok(out)
     }
 
     fn wav_bytes(&self) -> Result<Vec<u8>> {
         self.shown()?;
-        let vol = self.volume.as_ref().context("no volume loaded")?;
-        let cfg = self.config(vol);
+        let wire = self.wire()?;
+        let cfg = self.config(wire);
         // `wav`'s defaults: its --audio-rate and --seconds are
         // `WavConfig`'s, its beam is made for that rate.
         let wav = WavConfig { bits: cfg.view.bits, ..WavConfig::default() };
         let cfg = SceneConfig { beam: audio_beam(wav.rate_hz, cfg.view.bits), ..cfg };
-        let built = self.build(vol, &cfg)?;
+        let built = self.build(wire, &cfg)?;
         report("writing the WAV file", 0, 0);
         let mut out = std::io::Cursor::new(Vec::new());
         write_wav(&mut out, &built.samples, &wav)?;
@@ -481,10 +531,11 @@ impl Scope {
     }
 
     fn redraw(&mut self) -> Result<()> {
-        let vol = self.volume.as_ref().context("no volume loaded")?;
-        let cfg = self.config(vol);
         let t0 = web_time::Instant::now();
-        let built = self.build(vol, &cfg)?;
+        self.board_volume()?;
+        let wire = self.wire()?;
+        let cfg = self.config(wire);
+        let built = self.build(wire, &cfg)?;
         let t1 = web_time::Instant::now();
         report("drawing the picture", 0, 0);
         // A frame on a dark screen, as `render` draws it (one refresh).
@@ -617,11 +668,42 @@ mod tests {
         s.redraw().unwrap();
         let vol =
             WireVolume::from_loaded(&LoadedVolume::demo("gyroid:32".parse().unwrap()).unwrap()).unwrap();
-        let cfg = s.config(s.volume.as_ref().unwrap());
+        let cfg = s.config(s.wire().unwrap());
         assert_eq!(s.scene.as_ref().unwrap().samples, scene::build(&vol, &cfg).unwrap().samples);
         // Another level starts again from the host's first size.
         s.set_levels(vec![0.5]);
         assert_ne!(s.fit.as_ref().unwrap().0, s.fit_key());
+    }
+
+    /// With the board preset, the page fits the volume to the board's
+    /// picture as `render --board` does (gyroid:48: every 32nd slice whole,
+    /// downsampled by 4 every 2nd), and says so among its remarks.
+    #[test]
+    fn the_board_preset_fits_the_volume_as_render_does() {
+        let mut s = Scope::with_size(64).unwrap();
+        s.demo("gyroid:48").unwrap();
+        s.set_board("f407").unwrap();
+        s.redraw().unwrap();
+        let loaded = LoadedVolume::demo("gyroid:48".parse().unwrap()).unwrap();
+        let board = Board::named("f407").unwrap();
+        let cfg = SceneConfig { planes: s.planes.clone(), ..SceneConfig::board(board, s.levels.clone()) };
+        let fitted = fit::fit_to_board_picture(
+            loaded,
+            &FitOptions::default(),
+            &Limits::of_board(&board),
+            &cfg,
+            scene::auto_every,
+        )
+        .unwrap();
+        assert_eq!(fitted.volume.dims, Dims(12, 12, 12));
+        let wire = WireVolume::from_loaded(&fitted.volume).unwrap();
+        let want = scene::build(&wire, &s.config(&wire)).unwrap();
+        assert_eq!(s.scene.as_ref().unwrap().samples, want.samples);
+        assert!(s.stats().contains("downsampled by 4"), "{}", s.stats());
+        // Back on the host: the volume as read.
+        s.set_board("host").unwrap();
+        s.redraw().unwrap();
+        assert_eq!(s.wire().unwrap().dims, [48, 48, 48]);
     }
 
     #[test]
