@@ -1734,3 +1734,104 @@ fn a_still_picture_plays_on_from_the_tail_through_a_volume_and_its_commit() {
         assert_eq!(board_frame(&mut e), (want, true), "and it is replayed in turn");
     }
 }
+
+/// A spinning picture is not recorded as it plays (each frame is another
+/// angle), so when a volume's back must be folded into the front (its
+/// store), the picture must be recorded first: held still for one frame
+/// and recorded as that frame plays, never scheduled at once with the beam
+/// parked (some 30 ms for a large picture, more than a frame). Hydrogen
+/// 32^3, which folds on the way, after a spinning torus 12^3.
+#[test]
+fn a_spinning_picture_is_held_and_recorded_as_it_plays_before_a_fold() {
+    let cfg = EngineConfig { defer_contouring: true, ..EngineConfig::default() };
+    let mut board = Box::new(Firmware::new());
+    let mut e = Engine::new(cfg, board.buffers()).unwrap();
+    e.replay_frames(true);
+    let mut host = Host::new();
+    feed_deferring(&mut e, &host.volume(&Vol::demo(Demo::Torus, 12, SampleType::U8)), 256, 2000);
+    assert!(e.update(0));
+    let seq = host.next();
+    e.feed(
+        &frame(&Message::SetView {
+            seq,
+            yaw: 30.0,
+            pitch: 20.0,
+            roll: 0.0,
+            fov_deg: 0.0,
+            spin_deg_per_s: 90.0,
+        }),
+        1,
+    );
+    assert!(e.update(1));
+    let (a, _) = board_frame(&mut e);
+    e.update(20);
+    let (b, replayed) = board_frame(&mut e);
+    assert!(a != b && !replayed, "it spins, frame after frame");
+
+    let new = hydrogen32();
+    // Nothing recorded: the first command waits for the slice memory
+    // (`Busy`), which the next update gives back.
+    let begin = host.begin(&new);
+    answers(&mut e);
+    e.feed(&begin, 21);
+    assert_eq!(nacks(&answers(&mut e)), [NackCode::Busy]);
+    e.update(22);
+    e.feed(&begin, 23);
+    assert_eq!(nacks(&answers(&mut e)), []);
+    assert_eq!(e.state(), DeviceState::Receiving);
+    let bytes = [host.slices(&new, MAX_CHUNK).concat(), host.end()].concat();
+    let mut rest = &bytes[..];
+    let (mut folds, mut held) = (0, 0);
+    for t in 30.. {
+        assert!(t < 20_000, "the volume never went in");
+        let waits = e.split().0.waits();
+        assert!(!(waits && e.commit_parks()), "a fold parks the beam at t={t}");
+        folds += usize::from(waits);
+        e.update(t);
+        if rest.is_empty() && e.state() != DeviceState::Receiving && !e.split().0.busy() {
+            assert!(!e.commit_parks(), "the commit parks the beam");
+            e.update(t + 1);
+            break;
+        }
+        // A frame as the board plays it, some bytes fed and rows
+        // contoured between its refills.
+        let (mut link, mut screen) = e.split();
+        let mut frame = screen.frame();
+        let recording = matches!(frame, isoscope_core::engine::Frame::Recording(..));
+        held += usize::from(recording);
+        while frame.fill_with(512, |_| {}) == 512 {
+            if link.busy() {
+                link.contour(2000);
+            } else if !rest.is_empty() && !link.waits() {
+                let k = link.feed(&rest[..256.min(rest.len())], t);
+                rest = &rest[k..];
+            }
+        }
+        answers(&mut e);
+    }
+    assert!(folds > 0, "hydrogen 32^3 folds on the way");
+    assert!(held > 0, "the spinning picture was held and recorded");
+    // And the picture is a fresh board's that spins too (a spinning view
+    // orders in space, for every angle).
+    let mut fresh = Box::new(Firmware::new());
+    let mut f = Engine::new(cfg, fresh.buffers()).unwrap();
+    let mut other = Host::new();
+    let seq = other.next();
+    f.feed(
+        &frame(&Message::SetView {
+            seq,
+            yaw: 30.0,
+            pitch: 20.0,
+            roll: 0.0,
+            fov_deg: 0.0,
+            spin_deg_per_s: 90.0,
+        }),
+        0,
+    );
+    feed_deferring(&mut f, &other.volume(&new), 256, 2000);
+    assert!(f.update(0));
+    assert_eq!(e.chain_stats(), f.chain_stats());
+    // (Its frame is at another angle: the surface, in space.)
+    let surface = |e: &Engine<'_>| e.surface().map(|g| g.commands().collect::<Vec<_>>()).unwrap();
+    assert!(surface(&e) == surface(&f), "the same picture, bit for bit");
+}

@@ -154,6 +154,7 @@ impl<'a> Engine<'a> {
                 shown: None,
                 commit: false,
                 commit_waited: false,
+                fold_waited: false,
                 view: cfg.view,
                 spin_deg_per_s: 0.0,
                 spin_epoch_ms: 0,
@@ -198,8 +199,10 @@ impl<'a> Engine<'a> {
         // else is lent to the replay then.)
         // (While the volume arriving has the picture's store, the picture
         // plays from its recording alone, as it stood.)
-        let still =
-            dev.shown.is_some() && ((dev.spin_deg_per_s == 0.0 && !dev.dirty) || dev.stream.front_taken);
+        // (A picture about to be folded away is held still for a frame, to
+        // be recorded: `records_before_fold`.)
+        let still = dev.shown.is_some()
+            && ((dev.spin_deg_per_s == 0.0 && !dev.dirty) || dev.stream.front_taken || dev.fold_waited);
         // (A picture whose store the volume has plays only if recorded.)
         let key = still.then_some(self.generation).filter(|&k| !dev.stream.front_taken || self.kept.holds(k));
         // A frame kept in the tail plays from the tail alone: the head is
@@ -270,8 +273,18 @@ impl<'a> Engine<'a> {
     #[inline(never)]
     pub fn update_playing(&mut self, now_ms: u32, refill: &mut dyn FnMut(&mut Player<'_>)) -> bool {
         self.dev.check_timeout(now_ms);
-        if self.dev.stream.wants_fold() {
+        if self.records_before_fold() {
+            // One frame more of the picture on screen, held still and
+            // recorded into the tail as it plays; the fold then plays it.
+            self.dev.fold_waited = true;
+            self.dev.lend = Lend::Tail;
+            self.kept.clear();
+        } else if self.dev.stream.wants_fold() {
             self.fold(refill);
+            self.dev.fold_waited = false;
+        } else {
+            // (The transfer that waited for the fold was abandoned.)
+            self.dev.fold_waited = false;
         }
         self.reclaim(now_ms);
         let mut changed = false;
@@ -321,7 +334,7 @@ impl<'a> Engine<'a> {
     pub fn commit_parks(&self) -> bool {
         let recorded = self.kept.holds_in_tail(self.generation);
         (self.dev.commit && !self.commit_keeps_tail() && !self.records_before_commit())
-            || (self.dev.stream.wants_fold() && !recorded)
+            || (self.dev.stream.wants_fold() && !recorded && !self.records_before_fold())
     }
 
     /// The rest of the frame [`Engine::update_playing`] was playing when its
@@ -438,6 +451,28 @@ impl<'a> Engine<'a> {
         poll();
         dev.stream.fold(head, &mut self.back, &mut self.front, &mut poll);
         self.unfinished = old.unfinished();
+    }
+
+    /// Whether the fold due waits one frame, for the picture on screen to
+    /// be recorded into the tail as it plays (held still for that frame
+    /// if it spins: [`Engine::split`]), rather than scheduled and recorded
+    /// at once with the beam parked. Once a fold, as a board plays
+    /// ([`Engine::replay_frames`], [`EngineConfig::defer_contouring`]), when
+    /// the transfer keeps to the head (its slices and what spilled), so
+    /// that the tail is free.
+    fn records_before_fold(&self) -> bool {
+        let dev = &self.dev;
+        let head = self.slices.len().saturating_sub(dev.tail);
+        dev.stream.wants_fold()
+            && !dev.fold_waited
+            && dev.replay_frames
+            && dev.cfg.defer_contouring
+            && dev.shown.is_some()
+            && !self.front.is_empty()
+            && !dev.stream.front_taken
+            && !self.kept.holds_in_tail(self.generation)
+            && dev.stream.fits_head(head)
+            && dev.stream.spill_in_head()
     }
 
     /// Whether the commit due plays the picture on screen from the tail:
