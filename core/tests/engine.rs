@@ -1835,3 +1835,65 @@ fn a_spinning_picture_is_held_and_recorded_as_it_plays_before_a_fold() {
     let surface = |e: &Engine<'_>| e.surface().map(|g| g.commands().collect::<Vec<_>>()).unwrap();
     assert!(surface(&e) == surface(&f), "the same picture, bit for bit");
 }
+
+/// The beam parks for no fold and for the commits of all but the largest
+/// surfaces: every demo volume the core tests use (torus, gyroid, sphere
+/// and hydrogen at 20, 24, 28 and 32, `u8` and `f32`), sent to a board
+/// after a still torus 12^3 and played as a board plays them. The three
+/// that park need more than the slice memory less the recording for
+/// their stitch (the back, the spill and the stitch pass's reserve).
+#[test]
+fn the_beam_parks_only_for_commits_that_need_all_of_the_memory() {
+    let cfg = EngineConfig { defer_contouring: true, ..EngineConfig::default() };
+    let mut parking = Vec::new();
+    for demo in [Demo::Torus, Demo::Gyroid, Demo::Sphere, Demo::Hydrogen] {
+        for n in [20, 24, 28, 32] {
+            for ty in [SampleType::U8, SampleType::F32] {
+                let new = Vol::demo(demo, n, ty);
+                let mut board = Box::new(Firmware::new());
+                let mut e = Engine::new(cfg, board.buffers()).unwrap();
+                e.replay_frames(true);
+                let mut host = Host::new();
+                feed_deferring(&mut e, &host.volume(&Vol::demo(Demo::Torus, 12, SampleType::U8)), 256, 2000);
+                assert!(e.update(0));
+                board_frame(&mut e);
+                assert!(board_frame(&mut e).1, "recorded");
+                let begin = host.begin(&new);
+                answers(&mut e);
+                e.feed(&begin, 1);
+                if !nacks(&answers(&mut e)).is_empty() {
+                    e.update(2);
+                    e.feed(&begin, 2);
+                    assert_eq!(nacks(&answers(&mut e)), []);
+                }
+                let bytes = [host.slices(&new, MAX_CHUNK).concat(), host.end()].concat();
+                let mut rest = &bytes[..];
+                for t in 3.. {
+                    assert!(t < 50_000, "{demo:?} {n} {ty:?} never went in");
+                    let done = rest.is_empty() && e.state() != DeviceState::Receiving && !e.split().0.busy();
+                    if e.commit_parks() {
+                        assert!(!e.split().0.waits(), "{demo:?} {n} {ty:?}: a fold parks the beam");
+                        parking.push(format!("{demo:?} {n} {ty:?}"));
+                    }
+                    e.update(t);
+                    if done {
+                        break;
+                    }
+                    let (mut link, mut screen) = e.split();
+                    let mut frame = screen.frame();
+                    while frame.fill_with(512, |_| {}) == 512 {
+                        if link.busy() {
+                            link.contour(2000);
+                        } else if !rest.is_empty() && !link.waits() {
+                            let k = link.feed(&rest[..256.min(rest.len())], t);
+                            rest = &rest[k..];
+                        }
+                    }
+                    answers(&mut e);
+                }
+                assert_eq!(e.counters().volumes, 2, "{demo:?} {n} {ty:?} committed");
+            }
+        }
+    }
+    assert_eq!(parking, ["Torus 24 F32", "Gyroid 32 U8", "Gyroid 32 F32"]);
+}

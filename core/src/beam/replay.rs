@@ -84,8 +84,9 @@ pub struct Replay<'m> {
 ///
 /// A recording is written at the start of the memory lent. With a tail
 /// ([`Kept::with_tail`]), a finished recording that fits it is moved to the
-/// memory's last `tail` bytes, so that it stays playable while only those
-/// are lent (the rest of the memory then free for other work).
+/// very end of the memory, within its last `tail` bytes, so that it stays
+/// playable while only those (or only its own bytes) are lent, the rest
+/// of the memory then free for other work.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Kept {
     held: Held,
@@ -112,7 +113,7 @@ impl Kept {
     }
 
     /// Nothing kept; a finished recording of at most `tail` bytes is moved
-    /// to the memory's last `tail` bytes.
+    /// to the end of the memory (within its last `tail` bytes).
     pub const fn with_tail(tail: usize) -> Self {
         Self { held: Held::Nothing, tail }
     }
@@ -267,11 +268,13 @@ impl Recorder<'_, '_> {
         let len = self.enc.len;
         kept.held = if self.enc.full {
             Held::TooLong { key }
-        } else if kept.tail > 0 && len <= kept.tail && mem.len() > kept.tail {
-            // Into the tail, to stay playable from it alone.
-            let at = mem.len() - kept.tail;
+        } else if kept.tail > 0 && len <= kept.tail && len <= mem.len() {
+            // To the very end of the memory, in its tail: playable from
+            // the tail alone, or from any end of the memory that holds it
+            // (a commit that needs more than the head takes the rest).
+            let at = mem.len() - len;
             mem.copy_within(..len, at);
-            Held::Frame { key, from_end: kept.tail, len, stats }
+            Held::Frame { key, from_end: len, stats, len }
         } else {
             Held::Frame { key, from_end: mem.len(), len, stats }
         };

@@ -479,18 +479,41 @@ impl<'a> Engine<'a> {
     /// its recording is there, what spilled lies in the head, and the
     /// commit fits the head ([`Engine::commit_fits_head`]).
     fn commit_keeps_tail(&self) -> bool {
+        self.commit_replay().is_some()
+    }
+
+    /// The bytes at the end of the slice memory the commit due leaves to
+    /// the replay of the picture on screen, if it can play it: its
+    /// recording is in the tail and what spilled in the head, and the
+    /// commit fits the head (the tail left), or else the memory less the
+    /// recording's own bytes (the recording lies at the very end:
+    /// [`Kept`]). The stitch pass makes the same picture in any room from
+    /// its reserve on, and the order pass's scratch is the head either
+    /// way.
+    fn commit_replay(&self) -> Option<usize> {
         let dev = &self.dev;
-        dev.lend == Lend::Tail && self.kept.in_tail() && dev.stream.spill_in_head() && self.commit_fits_head()
+        if dev.lend != Lend::Tail || !self.kept.in_tail() || !dev.stream.spill_in_head() {
+            return None;
+        }
+        if self.commit_fits_head() {
+            return Some(dev.tail);
+        }
+        let room = self.slices.len().saturating_sub(self.kept.len());
+        (self.commit_needs() <= room).then_some(self.kept.len())
+    }
+
+    /// Bytes the commit due needs besides the order pass: what spilled,
+    /// and the stitch pass's scratch.
+    fn commit_needs(&self) -> usize {
+        let spilled = self.dev.stream.spilled().len();
+        let points = self.back.len() + spilled;
+        Geometry::bytes_for(spilled) + crate::path::stitch_reserve(self.dev.pieces as usize, points)
     }
 
     /// Whether the commit due could do with the head of the slice memory
     /// alone: what spilled and the stitch pass's scratch fit there.
     fn commit_fits_head(&self) -> bool {
-        let dev = &self.dev;
-        let head = self.slices.len().saturating_sub(dev.tail);
-        let spilled = dev.stream.spilled().len();
-        let points = self.back.len() + spilled;
-        Geometry::bytes_for(spilled) + crate::path::stitch_reserve(dev.pieces as usize, points) <= head
+        self.commit_needs() <= self.slices.len().saturating_sub(self.dev.tail)
     }
 
     /// Whether the commit due waits one frame, for the picture on screen
@@ -521,7 +544,8 @@ impl<'a> Engine<'a> {
     /// played on through `refill` meanwhile if it can be
     /// ([`Engine::update_playing`]).
     fn commit(&mut self, refill: &mut dyn FnMut(&mut Player<'_>)) {
-        if !self.commit_keeps_tail() {
+        let replay = self.commit_replay();
+        if replay.is_none() {
             self.dev.lend = Lend::Stream;
             self.kept.clear();
         }
@@ -531,7 +555,7 @@ impl<'a> Engine<'a> {
         dev.commit_waited = false;
         let Some(shown) = dev.shown.as_mut() else { return };
         let capacity = slices.len();
-        let (slots, lent) = cut(slices, dev.lend, dev.tail);
+        let (slots, lent) = cut(slices, dev.lend, replay.unwrap_or(dev.tail));
         // The frame on screen, played over and over while the passes run.
         let mut old = Replaying::new(lent, kept, key);
         let mut poll = || old.poll(refill);
