@@ -1897,3 +1897,58 @@ fn the_beam_parks_only_for_commits_that_need_all_of_the_memory() {
     }
     assert_eq!(parking, ["Torus 24 F32", "Gyroid 32 U8", "Gyroid 32 F32"]);
 }
+
+/// A spinning picture is not recorded as it plays: before a commit it is
+/// held still for a frame and recorded, so that the commit plays it on
+/// rather than parking the beam. A sphere 12^3 after a spinning torus.
+#[test]
+fn a_spinning_picture_is_held_and_recorded_as_it_plays_before_a_commit() {
+    let cfg = EngineConfig { defer_contouring: true, ..EngineConfig::default() };
+    let mut board = Box::new(Firmware::new());
+    let mut e = Engine::new(cfg, board.buffers()).unwrap();
+    e.replay_frames(true);
+    let mut host = Host::new();
+    feed_deferring(&mut e, &host.volume(&Vol::demo(Demo::Torus, 12, SampleType::U8)), 256, 2000);
+    assert!(e.update(0));
+    let seq = host.next();
+    e.feed(
+        &frame(&Message::SetView {
+            seq,
+            yaw: 30.0,
+            pitch: 20.0,
+            roll: 0.0,
+            fov_deg: 0.0,
+            spin_deg_per_s: 90.0,
+        }),
+        0,
+    );
+    e.update(0);
+    let new = Vol::demo(Demo::Sphere, 12, SampleType::U8);
+    let begin = host.begin(&new);
+    answers(&mut e);
+    e.feed(&begin, 0);
+    assert_eq!(nacks(&answers(&mut e)), [NackCode::Busy]);
+    e.update(0);
+    e.feed(&begin, 0);
+    feed_deferring(&mut e, &[host.slices(&new, MAX_CHUNK).concat(), host.end()].concat(), 256, 2000);
+    assert_eq!(nacks(&answers(&mut e)), []);
+    assert_ne!(e.state(), DeviceState::Receiving);
+    assert!(!e.commit_parks(), "the commit waits a frame instead");
+    e.update(0);
+    let (held, replayed) = board_frame(&mut e);
+    assert!(!replayed, "recorded as it plays");
+    assert!(!e.commit_parks(), "the commit plays it on");
+    let mut during = Vec::new();
+    e.update_playing(0, &mut |p| {
+        p.fill_with(300, |s| during.push(s));
+    });
+    if let Some(p) = e.unfinished() {
+        during.extend(p);
+    }
+    assert!(
+        !during.is_empty() && during.chunks(held.len()).all(|f| f == held),
+        "the held frame, over and over: {} of {}",
+        during.len(),
+        held.len()
+    );
+}

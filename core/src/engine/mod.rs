@@ -199,10 +199,14 @@ impl<'a> Engine<'a> {
         // else is lent to the replay then.)
         // (While the volume arriving has the picture's store, the picture
         // plays from its recording alone, as it stood.)
-        // (A picture about to be folded away is held still for a frame, to
-        // be recorded: `records_before_fold`.)
+        // (A picture about to be folded or committed away is held still
+        // for a frame, to be recorded: `records_before_fold`,
+        // `records_before_commit`.)
         let still = dev.shown.is_some()
-            && ((dev.spin_deg_per_s == 0.0 && !dev.dirty) || dev.stream.front_taken || dev.fold_waited);
+            && ((dev.spin_deg_per_s == 0.0 && !dev.dirty)
+                || dev.stream.front_taken
+                || dev.fold_waited
+                || dev.commit_waited);
         // (A picture whose store the volume has plays only if recorded.)
         let key = still.then_some(self.generation).filter(|&k| !dev.stream.front_taken || self.kept.holds(k));
         // A frame kept in the tail plays from the tail alone: the head is
@@ -520,12 +524,12 @@ impl<'a> Engine<'a> {
     /// to be recorded into the tail as it plays, so that the commit can
     /// play it on (the volume's slices took all of the slice memory, and
     /// the recording with it, but its commit fits the head, where what
-    /// spilled is moved first: [`Stream::spill_into_head`]). Once a
-    /// commit, and only as a board plays ([`Engine::replay_frames`],
-    /// [`EngineConfig::defer_contouring`]) a still picture (a still
-    /// picture's first frame is recorded). What the
-    /// commit makes is the same either way: its passes' scratch is the
-    /// head whether or not a recording keeps the tail.
+    /// spilled is moved first: [`Stream::spill_into_head`]), or the
+    /// picture spins (it is held still for that frame). Once a commit, and
+    /// only as a board plays ([`Engine::replay_frames`],
+    /// [`EngineConfig::defer_contouring`]). What the commit makes is the
+    /// same either way: its passes' scratch is the head whether or not a
+    /// recording keeps the tail.
     fn records_before_commit(&self) -> bool {
         let dev = &self.dev;
         dev.commit
@@ -534,8 +538,6 @@ impl<'a> Engine<'a> {
             && dev.cfg.defer_contouring
             && !self.front.is_empty()
             && !dev.stream.front_taken
-            && dev.spin_deg_per_s == 0.0
-            && !dev.dirty
             && !self.kept.holds_in_tail(self.generation)
             && self.commit_fits_head()
     }
