@@ -101,7 +101,8 @@
 //!     SpiTx::transaction_start(), SpiTx::write_vec(vec![0x3F, 0xFF]), SpiTx::transaction_end(),
 //!     SpiTx::transaction_start(), SpiTx::write_vec(vec![0xBF, 0xFF]), SpiTx::transaction_end(),
 //! ]);
-//! let z = PinMock::new(&[PinTx::set(State::Low), PinTx::set(State::High)]);
+//! // Z high blanks the beam (the default, `ZPolarity::BlankActiveHigh`).
+//! let z = PinMock::new(&[PinTx::set(State::High), PinTx::set(State::Low)]);
 //! let mut dac = Mcp4922::new(spi, z, NoPin::new(), Config::new());
 //! dac.write([Sample::new(0, 0, Beam::Off), Sample::new(4095, 4095, Beam::On)]).unwrap();
 //! assert_eq!(dac.beam(), Some(Beam::On));
