@@ -1592,11 +1592,38 @@ fn the_firmware_memory_keeps_hydrogen_32() {
     assert_eq!(board_frame(&mut e), (want, true), "hydrogen 32^3's frame fits the board's slice memory");
 }
 
-/// Play frames as a board does while `bytes` arrive: between refills of
-/// 512 samples, some rows of a completed slice contoured or up to 256
-/// bytes fed; [`Engine::update`] at each frame boundary until every byte
-/// is taken and contoured (the commit is left to the caller). Returns each
-/// frame's samples and whether it was replayed.
+/// One frame as a board plays it while bytes arrive, at time `t`: between
+/// refills of 512 samples (handed to `put`), some rows of a completed
+/// slice contoured or up to 256 bytes of `rest` fed. Returns whether the
+/// frame was replayed, and whether it was recorded as it played.
+fn board_plays(
+    e: &mut Engine<'_>,
+    rest: &mut &[u8],
+    t: u32,
+    mut put: impl FnMut(isoscope_core::output::Sample),
+) -> (bool, bool) {
+    let (mut link, mut screen) = e.split();
+    let mut frame = screen.frame();
+    let recorded = matches!(frame, isoscope_core::engine::Frame::Recording(..));
+    loop {
+        let n = frame.fill_with(512, &mut put);
+        if link.busy() {
+            link.contour(2000);
+        } else if !rest.is_empty() {
+            let k = link.feed(&rest[..256.min(rest.len())], t);
+            *rest = &rest[k..];
+        }
+        if n < 512 {
+            break;
+        }
+    }
+    (frame.is_replay(), recorded)
+}
+
+/// Play frames as a board does while `bytes` arrive ([`board_plays`]);
+/// [`Engine::update`] at each frame boundary until every byte is taken
+/// and contoured (the commit is left to the caller). Returns each frame's
+/// samples and whether it was replayed.
 fn board_receives(
     e: &mut Engine<'_>,
     bytes: &[u8],
@@ -1606,23 +1633,7 @@ fn board_receives(
     let mut frames = Vec::new();
     for t in t0.. {
         let mut got = Vec::new();
-        let replayed = {
-            let (mut link, mut screen) = e.split();
-            let mut frame = screen.frame();
-            loop {
-                let n = frame.fill_with(512, |s| got.push(s));
-                if link.busy() {
-                    link.contour(2000);
-                } else if !rest.is_empty() {
-                    let k = link.feed(&rest[..256.min(rest.len())], t);
-                    rest = &rest[k..];
-                }
-                if n < 512 {
-                    break;
-                }
-            }
-            frame.is_replay()
-        };
+        let (replayed, _) = board_plays(e, &mut rest, t, |s| got.push(s));
         frames.push((got, replayed));
 
         if rest.is_empty() && !e.split().0.busy() {
@@ -1634,13 +1645,34 @@ fn board_receives(
     frames
 }
 
+/// The board's settings: contouring deferred (and frames replayed,
+/// [`board_showing_a_torus`]).
+fn board_config() -> EngineConfig {
+    EngineConfig { defer_contouring: true, ..EngineConfig::default() }
+}
+
+/// A board over `mem` showing a still torus 12^3 (`u8`), whose recording
+/// fits the tail; and the host that sent it.
+fn board_showing_a_torus(mem: &mut Firmware) -> (Engine<'_>, Host) {
+    let mut e = Engine::new(board_config(), mem.buffers()).unwrap();
+    e.replay_frames(true);
+    let mut host = Host::new();
+    feed_deferring(&mut e, &host.volume(&Vol::demo(Demo::Torus, 12, SampleType::U8)), 256, 2000);
+    assert!(e.update(0));
+    (e, host)
+}
+
+/// A view at yaw 30 and pitch 20, spinning at 90 degrees a second.
+fn spinning(host: &mut Host) -> Vec<u8> {
+    let seq = host.next();
+    frame(&Message::SetView { seq, yaw: 30.0, pitch: 20.0, roll: 0.0, fov_deg: 0.0, spin_deg_per_s: 90.0 })
+}
+
 #[test]
 fn a_still_picture_plays_on_from_the_tail_through_a_volume_and_its_commit() {
-    // The board's memory and settings: contouring deferred, frames replayed.
-    let cfg = EngineConfig { defer_contouring: true, ..EngineConfig::default() };
-    // A picture whose recording fits the tail (36,864 bytes).
-    let old = Vol::demo(Demo::Torus, 12, SampleType::U8);
-    // Its slices fit the head and its pieces the back; or its pieces are
+    // The board's memory and settings, and a picture whose recording fits
+    // the tail (36,864 bytes): `board_showing_a_torus`. The new volume's
+    // slices fit the head and its pieces the back; or its pieces are
     // folded on the way and spill into the head (gyroid 28^3 `f32`, which
     // then thins, and hydrogen 32^3); or its two slices (128 x 128 `u8`,
     // 32 KB, as the MRI head's) are more than the head holds: they take
@@ -1655,11 +1687,7 @@ fn a_still_picture_plays_on_from_the_tail_through_a_volume_and_its_commit() {
         (wide, false, true),
     ] {
         let mut board = Box::new(Firmware::new());
-        let mut e = Engine::new(cfg, board.buffers()).unwrap();
-        e.replay_frames(true);
-        let mut host = Host::new();
-        feed_deferring(&mut e, &host.volume(&old), 256, 2000);
-        assert!(e.update(0));
+        let (mut e, mut host) = board_showing_a_torus(&mut board);
         let (first, replayed) = board_frame(&mut e);
         assert!(!replayed);
         assert_eq!(board_frame(&mut e), (first.clone(), true));
@@ -1724,7 +1752,7 @@ fn a_still_picture_plays_on_from_the_tail_through_a_volume_and_its_commit() {
 
         // The new picture is the one a board with nothing recorded draws.
         let mut fresh = Box::new(Firmware::new());
-        let mut f = Engine::new(cfg, fresh.buffers()).unwrap();
+        let mut f = Engine::new(board_config(), fresh.buffers()).unwrap();
         feed_deferring(&mut f, &Host::new().volume(&new), 256, 2000);
         assert!(f.update(0));
         assert_eq!(e.chain_stats(), f.chain_stats());
@@ -1743,25 +1771,9 @@ fn a_still_picture_plays_on_from_the_tail_through_a_volume_and_its_commit() {
 /// 32^3, which folds on the way, after a spinning torus 12^3.
 #[test]
 fn a_spinning_picture_is_held_and_recorded_as_it_plays_before_a_fold() {
-    let cfg = EngineConfig { defer_contouring: true, ..EngineConfig::default() };
     let mut board = Box::new(Firmware::new());
-    let mut e = Engine::new(cfg, board.buffers()).unwrap();
-    e.replay_frames(true);
-    let mut host = Host::new();
-    feed_deferring(&mut e, &host.volume(&Vol::demo(Demo::Torus, 12, SampleType::U8)), 256, 2000);
-    assert!(e.update(0));
-    let seq = host.next();
-    e.feed(
-        &frame(&Message::SetView {
-            seq,
-            yaw: 30.0,
-            pitch: 20.0,
-            roll: 0.0,
-            fov_deg: 0.0,
-            spin_deg_per_s: 90.0,
-        }),
-        1,
-    );
+    let (mut e, mut host) = board_showing_a_torus(&mut board);
+    e.feed(&spinning(&mut host), 1);
     assert!(e.update(1));
     let (a, _) = board_frame(&mut e);
     e.update(20);
@@ -1793,20 +1805,8 @@ fn a_spinning_picture_is_held_and_recorded_as_it_plays_before_a_fold() {
             e.update(t + 1);
             break;
         }
-        // A frame as the board plays it, some bytes fed and rows
-        // contoured between its refills.
-        let (mut link, mut screen) = e.split();
-        let mut frame = screen.frame();
-        let recording = matches!(frame, isoscope_core::engine::Frame::Recording(..));
-        held += usize::from(recording);
-        while frame.fill_with(512, |_| {}) == 512 {
-            if link.busy() {
-                link.contour(2000);
-            } else if !rest.is_empty() && !link.waits() {
-                let k = link.feed(&rest[..256.min(rest.len())], t);
-                rest = &rest[k..];
-            }
-        }
+        let (_, recorded) = board_plays(&mut e, &mut rest, t, |_| {});
+        held += usize::from(recorded);
         answers(&mut e);
     }
     assert!(folds > 0, "hydrogen 32^3 folds on the way");
@@ -1814,20 +1814,9 @@ fn a_spinning_picture_is_held_and_recorded_as_it_plays_before_a_fold() {
     // And the picture is a fresh board's that spins too (a spinning view
     // orders in space, for every angle).
     let mut fresh = Box::new(Firmware::new());
-    let mut f = Engine::new(cfg, fresh.buffers()).unwrap();
+    let mut f = Engine::new(board_config(), fresh.buffers()).unwrap();
     let mut other = Host::new();
-    let seq = other.next();
-    f.feed(
-        &frame(&Message::SetView {
-            seq,
-            yaw: 30.0,
-            pitch: 20.0,
-            roll: 0.0,
-            fov_deg: 0.0,
-            spin_deg_per_s: 90.0,
-        }),
-        0,
-    );
+    f.feed(&spinning(&mut other), 0);
     feed_deferring(&mut f, &other.volume(&new), 256, 2000);
     assert!(f.update(0));
     assert_eq!(e.chain_stats(), f.chain_stats());
@@ -1844,18 +1833,13 @@ fn a_spinning_picture_is_held_and_recorded_as_it_plays_before_a_fold() {
 /// their stitch (the back, the spill and the stitch pass's reserve).
 #[test]
 fn the_beam_parks_only_for_commits_that_need_all_of_the_memory() {
-    let cfg = EngineConfig { defer_contouring: true, ..EngineConfig::default() };
     let mut parking = Vec::new();
     for demo in [Demo::Torus, Demo::Gyroid, Demo::Sphere, Demo::Hydrogen] {
         for n in [20, 24, 28, 32] {
             for ty in [SampleType::U8, SampleType::F32] {
                 let new = Vol::demo(demo, n, ty);
                 let mut board = Box::new(Firmware::new());
-                let mut e = Engine::new(cfg, board.buffers()).unwrap();
-                e.replay_frames(true);
-                let mut host = Host::new();
-                feed_deferring(&mut e, &host.volume(&Vol::demo(Demo::Torus, 12, SampleType::U8)), 256, 2000);
-                assert!(e.update(0));
+                let (mut e, mut host) = board_showing_a_torus(&mut board);
                 board_frame(&mut e);
                 assert!(board_frame(&mut e).1, "recorded");
                 let begin = host.begin(&new);
@@ -1879,16 +1863,7 @@ fn the_beam_parks_only_for_commits_that_need_all_of_the_memory() {
                     if done {
                         break;
                     }
-                    let (mut link, mut screen) = e.split();
-                    let mut frame = screen.frame();
-                    while frame.fill_with(512, |_| {}) == 512 {
-                        if link.busy() {
-                            link.contour(2000);
-                        } else if !rest.is_empty() && !link.waits() {
-                            let k = link.feed(&rest[..256.min(rest.len())], t);
-                            rest = &rest[k..];
-                        }
-                    }
+                    board_plays(&mut e, &mut rest, t, |_| {});
                     answers(&mut e);
                 }
                 assert_eq!(e.counters().volumes, 2, "{demo:?} {n} {ty:?} committed");
@@ -1903,25 +1878,9 @@ fn the_beam_parks_only_for_commits_that_need_all_of_the_memory() {
 /// rather than parking the beam. A sphere 12^3 after a spinning torus.
 #[test]
 fn a_spinning_picture_is_held_and_recorded_as_it_plays_before_a_commit() {
-    let cfg = EngineConfig { defer_contouring: true, ..EngineConfig::default() };
     let mut board = Box::new(Firmware::new());
-    let mut e = Engine::new(cfg, board.buffers()).unwrap();
-    e.replay_frames(true);
-    let mut host = Host::new();
-    feed_deferring(&mut e, &host.volume(&Vol::demo(Demo::Torus, 12, SampleType::U8)), 256, 2000);
-    assert!(e.update(0));
-    let seq = host.next();
-    e.feed(
-        &frame(&Message::SetView {
-            seq,
-            yaw: 30.0,
-            pitch: 20.0,
-            roll: 0.0,
-            fov_deg: 0.0,
-            spin_deg_per_s: 90.0,
-        }),
-        0,
-    );
+    let (mut e, mut host) = board_showing_a_torus(&mut board);
+    e.feed(&spinning(&mut host), 0);
     e.update(0);
     let new = Vol::demo(Demo::Sphere, 12, SampleType::U8);
     let begin = host.begin(&new);

@@ -620,18 +620,25 @@ mod tests {
         assert_eq!(g.dropped(), 0);
     }
 
+    /// 200 bytes with a store of `n` points (of five kinds) lent from byte
+    /// `at`: the bytes, what it holds, and its points.
+    fn lent_at(at: usize, n: usize) -> (Vec<u8>, Held, Vec<Option<([u16; 3], Kind)>>) {
+        let kinds = [Kind::Move, Kind::Line, Kind::Dot, Kind::Loop, Kind::Line];
+        let mut bytes: Vec<u8> = (0..200u8).collect();
+        let mut g = Geometry::lent(&mut bytes[at..], Held::empty(5));
+        for (i, &k) in kinds.iter().take(n).enumerate() {
+            assert!(g.push_raw([i as u16, 1000 + i as u16, 0xFFFF - i as u16], k));
+        }
+        let points = (0..n).map(|i| g.get(i)).collect();
+        let held = g.held();
+        (bytes, held, points)
+    }
+
     #[test]
     fn a_store_moved_to_the_front_holds_what_it_held() {
-        let kinds = [Kind::Move, Kind::Line, Kind::Dot, Kind::Loop, Kind::Line];
         for at in [0, 1, 37, 60] {
-            for n in 0..=kinds.len() {
-                let mut bytes: Vec<u8> = (0..200u8).collect();
-                let mut g = Geometry::lent(&mut bytes[at..], Held::empty(5));
-                for (i, &k) in kinds.iter().take(n).enumerate() {
-                    assert!(g.push_raw([i as u16, 1000 + i as u16, 0xFFFF - i as u16], k));
-                }
-                let want: Vec<_> = (0..n).map(|i| g.get(i)).collect();
-                let held = g.held();
+            for n in 0..=5 {
+                let (mut bytes, held, want) = lent_at(at, n);
                 let held = Geometry::move_to_front(&mut bytes, at, held);
                 assert_eq!(held, Held { len: n, dropped: 0, broken: false, shift: 5 });
                 let g = Geometry::lent(&mut bytes[..Geometry::bytes_for(n)], held);
@@ -646,17 +653,10 @@ mod tests {
 
     #[test]
     fn a_store_moved_down_is_the_store_lent_its_new_bytes() {
-        let kinds = [Kind::Move, Kind::Line, Kind::Dot, Kind::Loop, Kind::Line];
         for at in [0, 1, 37, 60, 150] {
-            for n in 0..=kinds.len() {
+            for n in 0..=5 {
                 for to in 0..=200 {
-                    let mut bytes: Vec<u8> = (0..200u8).collect();
-                    let mut g = Geometry::lent(&mut bytes[at..], Held::empty(5));
-                    for (i, &k) in kinds.iter().take(n).enumerate() {
-                        assert!(g.push_raw([i as u16, 1000 + i as u16, 0xFFFF - i as u16], k));
-                    }
-                    let want: Vec<_> = (0..n).map(|i| g.get(i)).collect();
-                    let held = g.held();
+                    let (mut bytes, held, want) = lent_at(at, n);
                     let held = Geometry::move_down(&mut bytes, at, held, to);
                     if Geometry::points_in(to) < n {
                         assert_eq!(held.len(), 0, "{n} points do not fit {to} bytes");
