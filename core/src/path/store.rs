@@ -620,9 +620,12 @@ mod tests {
         assert_eq!(g.dropped(), 0);
     }
 
+    /// A stored point and its kind, as [`Geometry::get`] reads it.
+    type Stored = Option<([u16; 3], Kind)>;
+
     /// 200 bytes with a store of `n` points (of five kinds) lent from byte
     /// `at`: the bytes, what it holds, and its points.
-    fn lent_at(at: usize, n: usize) -> (Vec<u8>, Held, Vec<Option<([u16; 3], Kind)>>) {
+    fn lent_at(at: usize, n: usize) -> (Vec<u8>, Held, Vec<Stored>) {
         let kinds = [Kind::Move, Kind::Line, Kind::Dot, Kind::Loop, Kind::Line];
         let mut bytes: Vec<u8> = (0..200u8).collect();
         let mut g = Geometry::lent(&mut bytes[at..], Held::empty(5));
