@@ -13,12 +13,13 @@ use isoscope_sim::link::{SendConfig, WireVolume, send_volume};
 use isoscope_sim::volume::{DemoSpec, LoadedVolume};
 use std::convert::Infallible;
 
+mod common;
+
 #[path = "../../core/tests/common/segments.rs"]
 mod segments;
 use segments::segments;
 use std::io::{BufRead, BufReader, ErrorKind, Read, Write};
 use std::process::{Command as Process, Stdio};
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, Sender, channel};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -165,22 +166,8 @@ fn send_to_the_virtual_board_over_a_pty_and_snapshot_the_screen() {
         .stderr(Stdio::inherit())
         .spawn()
         .unwrap();
-    // The device exits once it shows the volume; should it not, stop it
-    // after two minutes, so the test fails instead of waiting for good.
-    let done = Arc::new(AtomicBool::new(false));
-    let watchdog = {
-        let (done, pid) = (Arc::clone(&done), device.id().to_string());
-        std::thread::spawn(move || {
-            for _ in 0..1200 {
-                if done.load(Ordering::Relaxed) {
-                    return false;
-                }
-                std::thread::sleep(Duration::from_millis(100));
-            }
-            let _ = Process::new("kill").arg(&pid).status();
-            true
-        })
-    };
+    // The device exits once it shows the volume.
+    let watchdog = common::Watchdog::new(device.id());
     let mut lines = BufReader::new(device.stdout.take().unwrap()).lines();
     let pty = lines.next().unwrap().unwrap();
     assert!(pty.starts_with("/dev/"), "first line is the pty: {pty}");
@@ -197,8 +184,7 @@ fn send_to_the_virtual_board_over_a_pty_and_snapshot_the_screen() {
     }
     let log: Vec<String> = lines.map(Result::unwrap).collect();
     let status = device.wait().unwrap();
-    done.store(true, Ordering::Relaxed);
-    assert!(!watchdog.join().unwrap(), "the device did not exit after showing the volume: {log:#?}");
+    assert!(!watchdog.stopped_it(), "the device did not exit after showing the volume: {log:#?}");
     assert!(status.success());
     let find = |word: &str| log.iter().any(|l| l.split_whitespace().nth(1) == Some(word));
     for word in ["hello", "begun", "committed", "redrawn", "snapshot", "samples"] {

@@ -11,9 +11,6 @@ use isoscope_sim::volume::{Dims, LoadedVolume, Samples};
 use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
 use std::process::{Command, Output, Stdio};
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Duration;
 
 const MNI: &str = "mni_icbm152_t1_tal_nlin_sym_09a_converted.nii.gz";
 
@@ -243,22 +240,8 @@ fn send_gives_the_board_the_oriented_volume() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    // Should the device not exit once it shows the volume, stop it after
-    // two minutes, so that the test fails instead of waiting for good.
-    let done = Arc::new(AtomicBool::new(false));
-    let watchdog = {
-        let (done, pid) = (Arc::clone(&done), device.id().to_string());
-        std::thread::spawn(move || {
-            for _ in 0..1200 {
-                if done.load(Ordering::Relaxed) {
-                    return false;
-                }
-                std::thread::sleep(Duration::from_millis(100));
-            }
-            let _ = Command::new("kill").arg(&pid).status();
-            true
-        })
-    };
+    // The device exits once it shows the volume.
+    let watchdog = common::Watchdog::new(device.id());
     let mut lines = BufReader::new(device.stdout.take().unwrap()).lines();
     let pty = lines.next().unwrap().unwrap();
     let sent = Command::new(bin())
@@ -269,8 +252,7 @@ fn send_gives_the_board_the_oriented_volume() {
     assert!(sent.status.success(), "send failed: {}", String::from_utf8_lossy(&sent.stderr));
     for _ in lines.by_ref() {}
     let status = device.wait().unwrap();
-    done.store(true, Ordering::Relaxed);
-    assert!(!watchdog.join().unwrap(), "the device did not exit after showing the volume");
+    assert!(!watchdog.stopped_it(), "the device did not exit after showing the volume");
     assert!(status.success());
     let want = frame(&[&ras], &s.path("render.txt"));
     assert!(std::fs::read(&board_samples).unwrap() == want, "the board's samples differ from the RAS head's");
