@@ -181,16 +181,14 @@ fn board_points(text: &str) -> u64 {
 /// board draws it.
 #[test]
 fn send_fits_an_mni152_sized_volume_to_the_virtual_board() {
-    let dir = std::env::temp_dir().join(format!("isoscope-fit-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let raw = dir.join("mni.raw");
+    let dir = common::Scratch::new("fit");
+    let raw = dir.0.join("mni.raw");
     let Samples::U8(bytes) = mni_like().samples else { unreachable!() };
     std::fs::write(&raw, &bytes).unwrap();
     let args = ["--dims", "197x233x189", "--dtype", "u8", "--level", "100", "--every", "8"];
     let mut input = vec![raw.as_os_str()];
     input.extend(args.iter().map(std::ffi::OsStr::new));
     let (err, text) = send_to_a_virtual_board(&input);
-    let _ = std::fs::remove_dir_all(&dir);
     assert!(err.contains("isoscope-sim: note: the board (an f407 by its capabilities)"), "{err}");
     assert!(
         err.contains("draws every 16th slice of a 98x116x94 volume (slices 32 voxels apart), and every 8th slice once downsampled by 3 (24 voxels apart)")

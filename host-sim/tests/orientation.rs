@@ -5,11 +5,10 @@
 //! (on every command that loads a volume) keeps the file's order.
 
 mod common;
-use common::real_data;
+use common::{Scratch, real_data};
 use isoscope_sim::formats::{Options, Orientation};
 use isoscope_sim::volume::{Dims, LoadedVolume, Samples};
 use std::io::{BufRead, BufReader};
-use std::path::PathBuf;
 use std::process::{Command, Output, Stdio};
 
 const MNI: &str = "mni_icbm152_t1_tal_nlin_sym_09a_converted.nii.gz";
@@ -121,27 +120,6 @@ fn every_command_that_loads_a_volume_takes_the_flag() {
     }
 }
 
-/// A scratch folder, removed afterwards.
-struct Scratch(PathBuf);
-
-impl Scratch {
-    fn new(name: &str) -> Self {
-        let dir = std::env::temp_dir().join(format!("isoscope-orientation-{name}-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        Scratch(dir)
-    }
-
-    fn path(&self, name: &str) -> String {
-        self.0.join(name).to_string_lossy().into_owned()
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
 /// A little-endian NIfTI-1 file of u8 samples with an sform (code 1),
 /// written field by field at the offsets of nifti1.h.
 fn nifti(dims: [usize; 3], srow: [[f32; 4]; 3], data: &[u8]) -> Vec<u8> {
@@ -217,7 +195,7 @@ fn frame(args: &[&str], out: &str) -> Vec<u8> {
 /// RAS order; with `--orientation index` it does not.
 #[test]
 fn a_turned_head_draws_as_the_ras_head() {
-    let s = Scratch::new("draw");
+    let s = Scratch::new("orientation-draw");
     let (ras, turned) = heads(&s);
     let out = s.path("frame.txt");
     let want = frame(&[&ras], &out);
@@ -230,7 +208,7 @@ fn a_turned_head_draws_as_the_ras_head() {
 /// shows the turned head exactly as `render --board` draws the RAS one.
 #[test]
 fn send_gives_the_board_the_oriented_volume() {
-    let s = Scratch::new("send");
+    let s = Scratch::new("orientation-send");
     let (ras, turned) = heads(&s);
     let board_samples = s.path("board.txt");
     let mut device = Command::new(bin())

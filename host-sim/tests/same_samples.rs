@@ -9,29 +9,11 @@
 mod common;
 use common::real_data;
 use std::io::{BufRead, BufReader};
-use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_isoscope-sim")
-}
-
-/// A scratch directory, removed at the end.
-struct Dir(PathBuf);
-
-impl Dir {
-    fn new(name: &str) -> Self {
-        let d = std::env::temp_dir().join(format!("isoscope-same-{name}-{}", std::process::id()));
-        std::fs::create_dir_all(&d).unwrap();
-        Self(d)
-    }
-}
-
-impl Drop for Dir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
 }
 
 /// Kills the board if the test fails before it exits.
@@ -55,8 +37,8 @@ fn run(args: &[&str]) -> String {
 /// The board's samples for `input` sent with `view` (send's flags), and
 /// the same from `render`, `stats` and `wav --scope-beam`.
 fn same(name: &str, input: &[&str], view: &[&str], board: &[&str]) {
-    let dir = Dir::new(name);
-    let file = |f: &str| dir.0.join(f).to_string_lossy().into_owned();
+    let dir = common::Scratch::new(&format!("same-{name}"));
+    let file = |f: &str| dir.path(f);
     let (device, rendered, counted, audio) = (file("device"), file("render"), file("stats"), file("wav"));
     let mut child = Command::new(bin());
     child.args(["device", "--tcp", "127.0.0.1:0", "--baud", "0", "--exit-after", "1", "--samples", &device]);
