@@ -259,7 +259,8 @@ pub const MIN_FIT_EXTENT: usize = 12;
 /// finer grid). `draw(f)` puts the volume downsampled by `f` on the
 /// board; factors are tried upwards while one could still rank better
 /// (`f` times the stride `asked` is less than the best spacing) and the
-/// grid keeps [`MIN_FIT_EXTENT`] samples along x and y.
+/// grid keeps [`MIN_FIT_EXTENT`] samples along x and y. Returns the
+/// board's picture at `first` and the best.
 ///
 /// # Errors
 /// `draw`'s first error.
@@ -268,17 +269,18 @@ pub fn finest_on_board(
     first: usize,
     asked: usize,
     mut draw: impl FnMut(usize) -> Result<Drawn>,
-) -> Result<Choice> {
+) -> Result<(Choice, Choice)> {
     let first = first.max(1);
     let rank = |c: &Choice| (c.drawn.dropped, c.spacing(), c.factor);
-    let mut best = Choice { factor: first, drawn: draw(first)? };
+    let at_first = Choice { factor: first, drawn: draw(first)? };
+    let mut best = at_first;
     let mut f = first;
     loop {
         f += 1;
         let d = downsampled_dims(dims, uniform(dims, f).0);
-        let could = !best.drawn.dropped && f.saturating_mul(asked.max(1)) >= best.spacing();
-        if could || d.0.min(d.1) < MIN_FIT_EXTENT || f > dims.0.min(dims.1) {
-            return Ok(best);
+        let none_better = !best.drawn.dropped && f.saturating_mul(asked.max(1)) >= best.spacing();
+        if none_better || d.0.min(d.1) < MIN_FIT_EXTENT || f > dims.0.min(dims.1) {
+            return Ok((at_first, best));
         }
         let c = Choice { factor: f, drawn: draw(f)? };
         if rank(&c) < rank(&best) {
@@ -493,32 +495,20 @@ fn dims_text(d: Dims) -> String {
 /// [`downsample`]), a volume no uniform downsample fits to the board, or
 /// a crop or downsample after which it still does not fit.
 pub fn fit(vol: LoadedVolume, opts: &FitOptions, limits: Option<&Limits>) -> Result<Fitted> {
-    fit_drawing(vol, opts, limits.map(|l| (l, None)))
+    fit_drawing(vol, opts, limits, None)
 }
 
-/// A board's picture of a volume: the stride asked for, and the board
-/// ([`Drawn`]) for a volume put on it.
-pub type Draw<'d> = (usize, &'d mut dyn FnMut(&LoadedVolume) -> Result<Drawn>);
-
-/// [`fit`] for a board whose picture `draw` gives: with neither a crop
-/// nor a downsample given, the uniform downsample the board draws most of
+/// [`fit`] for a board of `limits` whose picture the scene of `cfg` is
+/// (the engine with the board's memory, [`crate::scene::build`]), at the
+/// stride `every` gives for a volume's dims: with neither a crop nor a
+/// downsample given, the uniform downsample the board draws most of
 /// ([`finest_on_board`]: from the smallest that fits its slice memory on,
 /// the one whose drawn slices lie closest together in the volume), said in
-/// a note when it is not the smallest.
+/// a note when it is not the smallest. What `send`, `render --board` and
+/// the web page's board preset put on a board.
 ///
 /// # Errors
-/// As [`fit`], and `draw`'s.
-pub fn fit_to_board(vol: LoadedVolume, opts: &FitOptions, limits: &Limits, draw: Draw<'_>) -> Result<Fitted> {
-    fit_drawing(vol, opts, Some((limits, Some(draw))))
-}
-
-/// [`fit_to_board`] for a board whose picture the scene of `cfg` is (the
-/// engine with the board's memory, [`crate::scene::build`]), at the stride
-/// `every` gives for a volume's dims: what `send`, `render --board` and the
-/// web page's board preset put on a board.
-///
-/// # Errors
-/// As [`fit_to_board`], and a scene the board refuses.
+/// As [`fit`], and a scene the board refuses.
 pub fn fit_to_board_picture(
     vol: LoadedVolume,
     opts: &FitOptions,
@@ -531,13 +521,18 @@ pub fn fit_to_board_picture(
         let loaded = crate::scene::build(&crate::link::WireVolume::from_loaded(v)?, &cfg)?.loaded;
         Ok(Drawn { every: usize::from(loaded.every), dropped: loaded.dropped > 0 || loaded.cut > 0 })
     };
-    fit_to_board(vol, opts, limits, (1, &mut draw))
+    fit_drawing(vol, opts, Some(limits), Some(&mut draw))
 }
 
+/// The board's picture of a volume put on it ([`fit_to_board_picture`]).
+type DrawOnBoard<'d> = &'d mut dyn FnMut(&LoadedVolume) -> Result<Drawn>;
+
+/// [`fit`], and with `draw` [`fit_to_board_picture`].
 fn fit_drawing(
     vol: LoadedVolume,
     opts: &FitOptions,
-    board: Option<(&Limits, Option<Draw<'_>>)>,
+    limits: Option<&Limits>,
+    draw: Option<DrawOnBoard<'_>>,
 ) -> Result<Fitted> {
     let mut notes = Vec::new();
     let mut vol = vol;
@@ -546,7 +541,7 @@ fn fit_drawing(
         vol = crop(&vol, c)?;
         notes.push(format!("--crop {c}: {} of {}", dims_text(vol.dims), dims_text(original)));
     }
-    let Some((limits, draw)) = board else {
+    let Some(limits) = limits else {
         if let Some(f) = opts.downsample {
             let before = vol.dims;
             vol = downsample(&vol, f)?;
@@ -583,15 +578,14 @@ fn fit_drawing(
     // coarser ones while they may draw more.
     let mut thinned = None;
     let chosen = match (draw, chosen) {
-        (Some((asked, draw)), None | Some((_, true))) if opts.crop.is_none() => {
+        (Some(draw), None | Some((_, true))) if opts.crop.is_none() => {
             let first = chosen.map_or(1, |(f, _)| f.0[0]);
-            let at = |f: usize| -> Result<Drawn> {
+            // The stride asked for differs by factor (`every`): a bound of 1.
+            let (at_first, best) = finest_on_board(before, first, 1, |f| {
                 if f == 1 { draw(&vol) } else { draw(&downsample(&vol, uniform(before, f))?) }
-            };
-            let mut at = at;
-            let best = finest_on_board(before, first, asked, &mut at)?;
+            })?;
             if best.factor != first {
-                thinned = Some((first, at(first)?, best));
+                thinned = Some((first, at_first.drawn, best));
             }
             (best.factor > 1).then(|| (uniform(before, best.factor), true))
         }

@@ -244,7 +244,7 @@ fn search(
 ) -> (fit::Choice, Vec<usize>) {
     let dims = Dims(n, n, n);
     let mut tried = Vec::new();
-    let c = fit::finest_on_board(dims, 1, asked, |f| {
+    let (_, c) = fit::finest_on_board(dims, 1, asked, |f| {
         tried.push(f);
         let side = n / f;
         Ok(fit::Drawn { every: stride(side).max(asked), dropped: side > drops })
