@@ -375,11 +375,7 @@ fn fit_volume(
     args: &FitArgs,
     limits: Option<&isoscope_sim::fit::Limits>,
 ) -> Result<LoadedVolume> {
-    let fitted = isoscope_sim::fit::fit(vol, &args.options(), limits)?;
-    for n in &fitted.notes {
-        eprintln!("isoscope-sim: note: {n}");
-    }
-    Ok(fitted.volume)
+    Ok(noted(isoscope_sim::fit::fit(vol, &args.options(), limits)?))
 }
 
 /// Fit `vol` as `args` say to a board of `limits`, whose picture `cfg`
@@ -393,11 +389,15 @@ fn fit_board_volume(
     cfg: &SceneConfig,
     every: impl Fn(isoscope_sim::volume::Dims) -> usize,
 ) -> Result<LoadedVolume> {
-    let fitted = isoscope_sim::fit::fit_to_board_picture(vol, &args.options(), limits, cfg, every)?;
+    Ok(noted(isoscope_sim::fit::fit_to_board_picture(vol, &args.options(), limits, cfg, every)?))
+}
+
+/// The fitted volume, its notes said on standard error.
+fn noted(fitted: isoscope_sim::fit::Fitted) -> LoadedVolume {
     for n in &fitted.notes {
         eprintln!("isoscope-sim: note: {n}");
     }
-    Ok(fitted.volume)
+    fitted.volume
 }
 
 #[derive(Args, Debug, Clone, Copy)]
