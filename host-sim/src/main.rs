@@ -1057,6 +1057,13 @@ fn send(args: &SendArgs) -> Result<()> {
         fov_deg: args.perspective.unwrap_or(0.0),
         spin_deg_per_s: args.spin.unwrap_or(0.0),
     });
+    // The picture `board` draws of the volume, as it will be sent.
+    let board_picture = |board: Board| -> Result<SceneConfig> {
+        let mut cfg = SceneConfig::board(board, levels.clone());
+        cfg.planes = planes(&args.input.axes)?;
+        cfg.every = usize::from(args.every);
+        Ok(cfg)
+    };
     // With --board the volume is fitted to that board and previewed before
     // the port is opened; without, to what the board says it takes.
     let mut vol = Some(vol);
@@ -1065,9 +1072,7 @@ fn send(args: &SendArgs) -> Result<()> {
         && let Some(vol) = vol.take()
     {
         // The settings first, so that their errors say what they are.
-        let mut preview = SceneConfig::board(board, levels.clone());
-        preview.planes = planes(&args.input.axes)?;
-        preview.every = usize::from(args.every);
+        let mut preview = board_picture(board)?;
         preview.send()?;
         let every = preview.every;
         let limits = Limits::of_board(&board);
@@ -1095,7 +1100,7 @@ fn send(args: &SendArgs) -> Result<()> {
         fitted = Some(wire);
     }
     let cfg = SendConfig {
-        levels,
+        levels: levels.clone(),
         axes,
         every: args.every,
         window: args.window,
@@ -1125,11 +1130,9 @@ fn send(args: &SendArgs) -> Result<()> {
             // --board fits it, to what it draws; any other to its slices.
             let fitted = match isoscope_sim::fit::known_board(link.board()) {
                 Some(board) => {
-                    let mut cfg = SceneConfig::board(board, cfg.levels.clone());
-                    cfg.planes = planes(&args.input.axes)?;
-                    cfg.every = usize::from(args.every);
                     let limits = Limits::of_info(link.board());
-                    fit_board_volume(vol, &args.input.fit, &limits, &cfg, |_| usize::from(args.every))?
+                    let every = usize::from(args.every);
+                    fit_board_volume(vol, &args.input.fit, &limits, &board_picture(board)?, |_| every)?
                 }
                 None => fit_volume(vol, &args.input.fit, Some(&Limits::of_info(link.board())))?,
             };
