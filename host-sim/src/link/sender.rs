@@ -759,3 +759,160 @@ impl Transfer {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::board::{HostBuffers, host_capacity};
+    use crate::volume::LoadedVolume;
+    use isoscope_core::engine::{Engine, EngineConfig};
+
+    fn hydrogen(n: usize) -> WireVolume {
+        let spec = format!("hydrogen:{n}").parse().unwrap();
+        WireVolume::from_loaded(&LoadedVolume::demo(spec).unwrap()).unwrap()
+    }
+
+    fn cfg() -> SendConfig {
+        SendConfig { levels: vec![0.1], chunk: 128, window: 4, ..SendConfig::default() }
+    }
+
+    /// What a run did: the bytes written, one entry a `transmit`.
+    struct Run {
+        written: Vec<Vec<u8>>,
+        result: Result<SendReport, SendError>,
+    }
+
+    /// Drive `sender` against `board` (`None`: a silent line) on a clock
+    /// of whole milliseconds, as a driver does: write what it gives,
+    /// hand it the board's answers, wake it each millisecond. Loses the
+    /// `lose`-th write. Sends `vol` once connected.
+    fn run(mut board: Option<&mut Engine<'_>>, vol: &WireVolume, lose: Option<usize>) -> Run {
+        let mut sender = Sender::new(0xBEEF, Duration::ZERO);
+        let mut written = Vec::new();
+        for t in 0..200_000u32 {
+            let now = Duration::from_millis(u64::from(t));
+            if sender.state() == State::Connected
+                && let Err(e) = sender.start(vol, &cfg(), now)
+            {
+                return Run { written, result: Err(e) };
+            }
+            while let Some(bytes) = sender.transmit(now) {
+                if let Some(b) = board.as_deref_mut()
+                    && lose != Some(written.len())
+                {
+                    b.feed(&bytes, t);
+                }
+                written.push(bytes);
+            }
+            let mut out = [0u8; 4096];
+            let n = board.as_deref_mut().map_or(0, |b| {
+                b.update(t);
+                b.transmit(&mut out)
+            });
+            let step = if n > 0 { sender.receive(&out[..n], now) } else { sender.on_time(now) };
+            match (step, sender.state()) {
+                (Err(e), _) => return Run { written, result: Err(e) },
+                (Ok(()), State::Done(report)) => return Run { written, result: Ok(report) },
+                _ => {}
+            }
+        }
+        panic!("the sender neither finished nor failed in 200 s: {sender:?}");
+    }
+
+    fn engine(mem: &mut HostBuffers) -> Engine<'_> {
+        Engine::new(EngineConfig::default(), mem.buffers()).unwrap()
+    }
+
+    /// On a clean line every frame is written once, and they are the
+    /// flush, the hello and `volume_messages`' frames, in order.
+    #[test]
+    fn a_clean_line_carries_each_frame_once() {
+        let vol = hydrogen(8);
+        let mut mem = HostBuffers::new(&host_capacity(8 * 8 * 4, 16, 10_000));
+        let mut board = engine(&mut mem);
+        let Run { written, result } = run(Some(&mut board), &vol, None);
+        let report = result.unwrap();
+        let hello = Message::Hello { protocol: PROTOCOL_VERSION, firmware: crate_version(), seq: 0xBEEF };
+        let mut want = vec![[vec![0], frame(&hello).unwrap()].concat()];
+        let levels = cfg().check().unwrap();
+        want.extend(volume_messages(&vol, &cfg(), levels, 0xBEEF).map(|m| frame(&m).unwrap()));
+        assert_eq!(written, want);
+        assert_eq!((report.retransmitted, report.timeouts, report.frames), (0, 0, want.len() as u64 - 1));
+        assert_eq!(report.wire_bytes, want[1..].iter().map(|f| f.len() as u64).sum::<u64>());
+        let (state, points, _) = report.status.expect("the board's status after the picture");
+        assert_eq!(state, DeviceState::Showing);
+        assert!(points > 0 && board.surface().is_some());
+    }
+
+    /// The loss of any one write, the hello's included, is recovered by
+    /// the sender's deadlines alone (a go-back after the board's nack, or
+    /// a timeout), and the board shows the clean run's picture.
+    #[test]
+    fn losing_any_one_write_is_recovered() {
+        let vol = hydrogen(8);
+        let clean = {
+            let mut mem = HostBuffers::new(&host_capacity(8 * 8 * 4, 16, 10_000));
+            let mut board = engine(&mut mem);
+            run(Some(&mut board), &vol, None)
+        };
+        let points = clean.result.unwrap().status.unwrap().1;
+        for k in 0..clean.written.len() {
+            let mut mem = HostBuffers::new(&host_capacity(8 * 8 * 4, 16, 10_000));
+            let mut board = engine(&mut mem);
+            let report =
+                run(Some(&mut board), &vol, Some(k)).result.unwrap_or_else(|e| panic!("write {k}: {e}"));
+            assert!(report.retransmitted > 0, "write {k} lost: {report:?}");
+            assert_eq!(report.status.map(|s| s.1), Some(points), "write {k} lost");
+        }
+    }
+
+    /// A silent line: three hellos, each after the last waited
+    /// `HELLO_WAIT`, then a plain error.
+    #[test]
+    fn a_silent_board_is_greeted_three_times() {
+        let Run { written, result } = run(None, &hydrogen(4), None);
+        assert_eq!(result.unwrap_err(), SendError::NoAnswer);
+        assert_eq!(written.len(), HELLO_TRIES as usize);
+        assert!(written.iter().all(|w| *w == written[0]));
+        let mut s = Sender::new(7, Duration::ZERO);
+        assert!(s.transmit(Duration::ZERO).is_some());
+        assert_eq!(s.deadline(), Some(HELLO_WAIT));
+        s.on_time(HELLO_WAIT - Duration::from_millis(1)).unwrap();
+        assert!(s.transmit(HELLO_WAIT).is_none(), "a hello again before its deadline");
+        assert_eq!(s.start(&hydrogen(4), &cfg(), HELLO_WAIT), Err(SendError::NotConnected));
+        assert_eq!(s.closed(HELLO_WAIT), Err(SendError::ClosedBeforeHello));
+        assert_eq!(s.on_time(HELLO_WAIT * 9), Err(SendError::ClosedBeforeHello), "failed for good");
+    }
+
+    /// A board that greets and then falls silent is given up on after
+    /// `max_timeouts` timeouts in a row, each sending the window again.
+    #[test]
+    fn a_board_that_falls_silent_is_given_up_on() {
+        let vol = hydrogen(8);
+        let mut mem = HostBuffers::new(&host_capacity(8 * 8 * 4, 16, 10_000));
+        let mut board = engine(&mut mem);
+        let mut s = Sender::new(1, Duration::ZERO);
+        let hello = s.transmit(Duration::ZERO).unwrap();
+        board.feed(&hello, 0);
+        board.update(0);
+        let mut out = [0u8; 4096];
+        let n = board.transmit(&mut out);
+        s.receive(&out[..n], Duration::ZERO).unwrap();
+        assert_eq!(s.state(), State::Connected);
+        assert!(s.board().is_some_and(|b| b.hellos == 1));
+        s.start(&vol, &cfg(), Duration::ZERO).unwrap();
+        let mut now = Duration::ZERO;
+        let mut err = None;
+        for _ in 0..100 {
+            while s.transmit(now).is_some() {}
+            now = s.deadline().unwrap();
+            if let Err(e) = s.on_time(now) {
+                err = Some(e);
+                break;
+            }
+        }
+        let max = SendConfig::default().max_timeouts;
+        assert_eq!(err, Some(SendError::StoppedAnswering(max + 1)));
+        assert!(err.unwrap().to_string().contains("stopped answering"));
+    }
+}
