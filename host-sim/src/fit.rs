@@ -524,6 +524,29 @@ pub fn fit_to_board_picture(
     fit_drawing(vol, opts, Some(limits), Some(&mut draw))
 }
 
+/// Fit `vol` as `send` fits it to a board that said what it takes
+/// (`info`): a board the core knows by its capabilities ([`known_board`])
+/// as `--board` fits it, to the picture `picture` makes of it
+/// ([`fit_to_board_picture`], at the stride `every` gives); any other to
+/// its slices ([`fit`]). What `send` and the web page's *send to board*
+/// put on a connected board.
+///
+/// # Errors
+/// As [`fit_to_board_picture`] and [`fit`], and `picture`'s.
+pub fn fit_to_connected(
+    vol: LoadedVolume,
+    opts: &FitOptions,
+    info: &BoardInfo,
+    picture: impl FnOnce(Board) -> Result<crate::scene::SceneConfig>,
+    every: impl Fn(Dims) -> usize,
+) -> Result<Fitted> {
+    let limits = Limits::of_info(info);
+    match known_board(info) {
+        Some(board) => fit_to_board_picture(vol, opts, &limits, &picture(board)?, every),
+        None => fit(vol, opts, Some(&limits)),
+    }
+}
+
 /// The board's picture of a volume put on it ([`fit_to_board_picture`]).
 type DrawOnBoard<'d> = &'d mut dyn FnMut(&LoadedVolume) -> Result<Drawn>;
 

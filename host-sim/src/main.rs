@@ -1126,16 +1126,15 @@ fn send(args: &SendArgs) -> Result<()> {
         Some(w) => w,
         None => {
             let vol = vol.context("the volume was fitted already")?;
-            // A board the core knows by its capabilities is fitted as
-            // --board fits it, to what it draws; any other to its slices.
-            let fitted = match isoscope_sim::fit::known_board(link.board()) {
-                Some(board) => {
-                    let limits = Limits::of_info(link.board());
-                    let every = usize::from(args.every);
-                    fit_board_volume(vol, &args.input.fit, &limits, &board_picture(board)?, |_| every)?
-                }
-                None => fit_volume(vol, &args.input.fit, Some(&Limits::of_info(link.board())))?,
-            };
+            let every = usize::from(args.every);
+            let fitted = isoscope_sim::fit::fit_to_connected(
+                vol,
+                &args.input.fit.options(),
+                link.board(),
+                board_picture,
+                |_| every,
+            )?;
+            let fitted = noted(fitted);
             WireVolume::from_loaded(&fitted)?
         }
     };
