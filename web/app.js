@@ -9,6 +9,8 @@
 // zoom (0.1 to 1), axes=xy,xz,yz, every=N (0: auto), board=f407, spin=1,
 // size=PIXELS. Tests read window.isoscope (see docs/web.md).
 
+import { setupSerial } from './serial.js';
+
 const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
 const DEFAULT_VIEW = { yaw: 30, pitch: 20, zoom: 0.9 };
@@ -397,6 +399,7 @@ async function main() {
   $('board').checked = params.get('board') === 'f407';
   spinning = $('spin').checked = params.get('spin') === '1';
   wireControls();
+  setupSerial({ call, settings, spinning: () => spinning, showError });
   const at = params.has('level') ? params.get('level').split(',').map(Number.parseFloat) : null;
   await loadDemo(params.get('demo') ?? 'hydrogen:32', at);
 }

@@ -6,11 +6,14 @@
 // sends { progress: { id, label, done, total } } (total 0: a step with no
 // count) when the step changes and at most every PROGRESS_MS otherwise.
 
-import init, { Scope } from './isoscope_web.js';
+import init, { Link, Scope } from './isoscope_web.js';
 
 const PROGRESS_MS = 100;
 
 let scope = null;
+// The board over Web Serial (web/serial.js moves the port's bytes): the
+// command line's sender, on this worker's clock.
+let link = null;
 // The request running, and what the page was last told of it.
 let job = null;
 
@@ -47,16 +50,39 @@ const ops = {
   // Apply the page's settings; build and draw the frame if they changed
   // (null if not).
   frame({ settings: s }) {
-    scope.set_levels(Float32Array.from(s.levels));
-    scope.set_view(s.yaw, s.pitch, s.zoom);
-    scope.set_planes(s.planes);
-    scope.set_every(s.every);
-    scope.set_board(s.board);
+    apply(s);
     if (!scope.update()) return answer(null);
     const t0 = performance.now();
     const pixels = scope.pixels();
     const pixelsMs = performance.now() - t0;
     return answer({ size: scope.size(), pixels, pixelsMs, stats: scope.stats() }, [pixels.buffer]);
+  },
+  // The board link: greet a board (a new link), move the port's bytes and
+  // the time through it (`bytes` read, or `closed`), send the page's
+  // volume as `send` would. Each answers what to write and when to wake
+  // it (linkIo with nothing), and its state (JSON).
+  linkOpen({ baud }) {
+    link = new Link(performance.now(), baud);
+    return linkStep();
+  },
+  linkIo({ bytes, closed }) {
+    if (!link) throw new Error('no board connected');
+    const now = performance.now();
+    try {
+      if (bytes) link.receive(bytes, now);
+      if (closed) link.closed(now);
+      link.tick(now);
+    } catch (e) {
+      // The link has failed for good: its state says why.
+      if (e instanceof WebAssembly.RuntimeError) throw e;
+    }
+    return linkStep();
+  },
+  linkSend({ settings, spin }) {
+    if (!link) throw new Error('no board connected');
+    apply(settings);
+    const sent = JSON.parse(scope.send_to(link, spin, performance.now()));
+    return linkStep(sent);
   },
   samples() {
     return answer(scope.samples_text());
@@ -76,6 +102,23 @@ const ops = {
     }
   },
 };
+
+function apply(s) {
+  scope.set_levels(Float32Array.from(s.levels));
+  scope.set_view(s.yaw, s.pitch, s.zoom);
+  scope.set_planes(s.planes);
+  scope.set_every(s.every);
+  scope.set_board(s.board);
+}
+
+// The bytes the link has to write now, the milliseconds until it is to be
+// woken (null: it waits for nothing), and its state.
+function linkStep(sent = null) {
+  const out = link.transmit(performance.now());
+  const deadline = link.deadline();
+  const wait = deadline === undefined ? null : Math.max(0, deadline - performance.now());
+  return answer({ out, wait, state: JSON.parse(link.state()), sent }, [out.buffer]);
+}
 
 function message(e) {
   if (e instanceof WebAssembly.RuntimeError) {

@@ -19,6 +19,13 @@
 //! to the worker's global `isoscopeProgress(label, done, total)` function
 //! if it has one (`total` 0: a step with no count).
 //!
+//! A board over Web Serial: [`Link`] is the command line's sender
+//! ([`Sender`], the same state machine `isoscope-sim send` drives), driven
+//! by the page's `web/serial.js` through the worker: the bytes the port
+//! read go in, the bytes to write and the time to wake it come out. The
+//! volume it sends is the page's, fitted as `send` fits it
+//! ([`Scope::send_to`]).
+//!
 //! Every method that can fail returns a JavaScript error with the message
 //! the command line would print; none panics on bad input.
 
@@ -31,13 +38,14 @@ use isoscope_sim::board::frames_for;
 use isoscope_sim::fit::{self, FitOptions, Limits};
 use isoscope_sim::formats::Options;
 use isoscope_sim::info::{LEVEL_BINS, Summary, summarize};
-use isoscope_sim::link::WireVolume;
+use isoscope_sim::link::{BoardInfo, SendConfig, SendProgress, Sender, State, ViewSetting, WireVolume};
 use isoscope_sim::phosphor::{Phosphor, PhosphorConfig};
 use isoscope_sim::progress::Progress;
 use isoscope_sim::scene::{self, Scene, SceneConfig};
 use isoscope_sim::volume::{DemoSpec, Dims, LoadedVolume};
 use isoscope_sim::wav::{WavConfig, audio_beam, write_wav};
 use std::fmt::Write as _;
+use std::time::Duration;
 use wasm_bindgen::prelude::*;
 
 /// The largest volume a page loads, in bytes of samples: a wasm32 page has
@@ -284,6 +292,21 @@ impl Scope {
         self.wav_bytes().map_err(js)
     }
 
+    /// Send the page's volume to the board behind `link` (which has said
+    /// what it takes), as `isoscope-sim send` sends it with the page's
+    /// levels, planes, stride and view (yaw, pitch; `spin` degrees a
+    /// second): with the board preset, fitted to that board as `send
+    /// --board` fits it; else as `send` fits a volume to the board that
+    /// answered ([`fit::fit_to_connected`]). What is sent, as JSON: `dims`,
+    /// `dtype`, `every`, `levels` and the fit's `notes`.
+    ///
+    /// # Errors
+    /// No volume, settings or a volume the board cannot take, or a link
+    /// not connected.
+    pub fn send_to(&mut self, link: &mut Link, spin: f32, now_ms: f64) -> Result<String, JsError> {
+        self.send_plan(link, spin, now_ms).map_err(js)
+    }
+
     /// The volume as JSON: `name`, `dims`, `dtype`, `range` (or null),
     /// `histogram`, `suggested` and `default_levels`, and the readers'
     /// `notes`; `null` with no volume.
@@ -494,6 +517,55 @@ impl Scope {
         })
     }
 
+    /// [`Scope::send_to`].
+    fn send_plan(&mut self, link: &mut Link, spin: f32, now_ms: f64) -> Result<String> {
+        let info = *link.sender.board().context("the board has not said what it takes: connect first")?;
+        let (wire, notes) = self.volume_for(&info)?;
+        let [nx, ny, nz] = wire.dims;
+        let every = self.every_for(Dims(nx.into(), ny.into(), nz.into()));
+        let cfg = SendConfig {
+            levels: self.levels.clone(),
+            axes: scene::axes(&self.planes),
+            every: u8::try_from(every)
+                .with_context(|| format!("a stride of {every} slices goes to no board"))?,
+            baud: link.baud,
+            view: Some(ViewSetting {
+                angles: [self.yaw, self.pitch, View::DEFAULT.roll],
+                fov_deg: 0.0,
+                spin_deg_per_s: spin,
+            }),
+            ..SendConfig::default()
+        };
+        link.sender.start(&wire, &cfg, at(now_ms))?;
+        let mut o = Json::default();
+        o.raw("dims", &format!("[{nx},{ny},{nz}]"));
+        o.str("dtype", &format!("{:?}", wire.sample_type));
+        o.raw("every", &every.to_string());
+        o.raw("levels", &list(cfg.levels.iter().map(|&l| num(l))));
+        o.raw("notes", &list(notes.iter().map(|n| quote(n))));
+        Ok(o.end())
+    }
+
+    /// The volume to send to a board that said `info`, and the notes on
+    /// its fit: with the board preset, the page's board volume (`send
+    /// --board`); else fitted as `send` fits it to the board that answered.
+    fn volume_for(&mut self, info: &BoardInfo) -> Result<(WireVolume, Vec<String>)> {
+        if self.board.is_some() {
+            self.board_volume()?;
+            let (_, wire, notes) = self.fitted.as_ref().context("the volume is not fitted to the board")?;
+            return Ok((wire.clone(), notes.clone()));
+        }
+        let vol = self.volume.as_ref().context("no volume loaded")?;
+        report("fitting the volume to the board", 0, 0);
+        let picture = |board: Board| {
+            Ok(SceneConfig { planes: self.planes.clone(), ..SceneConfig::board(board, self.levels.clone()) })
+        };
+        let fitted = fit::fit_to_connected(vol.loaded.clone(), &FitOptions::default(), info, picture, |d| {
+            self.every_for(d)
+        })?;
+        Ok((WireVolume::from_loaded(&fitted.volume)?, fitted.notes))
+    }
+
     fn fit_key(&self) -> Fit {
         Fit { levels: self.levels.clone(), planes: self.planes.clone(), every: self.every, board: self.board }
     }
@@ -546,6 +618,137 @@ impl Scope {
         self.fit = Some((self.fit_key(), built.capacity.points));
         self.scene = Some(built);
         Ok(())
+    }
+}
+
+/// The page's link to a board: the command line's sender ([`Sender`]),
+/// driven by `web/serial.js` over Web Serial. Times are milliseconds on
+/// one clock the caller keeps (the worker's `performance.now()`).
+#[wasm_bindgen]
+pub struct Link {
+    sender: Sender,
+    /// The port's line rate, for the report's efficiency.
+    baud: u32,
+}
+
+/// A time in milliseconds as the sender's: negative, NaN and past a
+/// million years are clamped (no panic on any number).
+fn at(ms: f64) -> Duration {
+    Duration::from_secs_f64(if ms.is_finite() { ms.clamp(0.0, 3.0e16) / 1e3 } else { 0.0 })
+}
+
+/// Milliseconds of a time of the sender's.
+fn ms(t: Duration) -> f64 {
+    t.as_secs_f64() * 1e3
+}
+
+#[wasm_bindgen]
+impl Link {
+    /// A link about to greet the board on a port opened at `baud` bit/s.
+    #[wasm_bindgen(constructor)]
+    pub fn new(now_ms: f64, baud: u32) -> Link {
+        // The first command's sequence number: any, different from one
+        // connection to the next.
+        let seq0 = (at(now_ms).subsec_micros() as u16) ^ 0x5A5A;
+        Link { sender: Sender::new(seq0, at(now_ms)), baud }
+    }
+
+    /// The bytes to write to the port now (none: empty).
+    pub fn transmit(&mut self, now_ms: f64) -> Vec<u8> {
+        let mut out = Vec::new();
+        while let Some(bytes) = self.sender.transmit(at(now_ms)) {
+            out.extend(bytes);
+        }
+        out
+    }
+
+    /// Bytes the port read.
+    ///
+    /// # Errors
+    /// The board refused the transfer (the link has failed for good).
+    pub fn receive(&mut self, bytes: &[u8], now_ms: f64) -> Result<(), JsError> {
+        self.sender.receive(bytes, at(now_ms)).map_err(|e| JsError::new(&e.to_string()))
+    }
+
+    /// Wake the link at `now_ms` (at or after [`Link::deadline`]).
+    ///
+    /// # Errors
+    /// The board gave no answer in time, too often.
+    pub fn tick(&mut self, now_ms: f64) -> Result<(), JsError> {
+        self.sender.on_time(at(now_ms)).map_err(|e| JsError::new(&e.to_string()))
+    }
+
+    /// The port closed.
+    ///
+    /// # Errors
+    /// Unless the transfer was done.
+    pub fn closed(&mut self, now_ms: f64) -> Result<(), JsError> {
+        self.sender.closed(at(now_ms)).map_err(|e| JsError::new(&e.to_string()))
+    }
+
+    /// When to wake the link ([`Link::tick`]) if the board says nothing,
+    /// in milliseconds; none when it waits for nothing.
+    pub fn deadline(&self) -> Option<f64> {
+        self.sender.deadline().map(ms)
+    }
+
+    /// Where the link is, as JSON: `state` (`greeting`, `connected`,
+    /// `sending`, `picture`: waiting for the new picture, `done`,
+    /// `failed`), `error`, `board` (what it takes: `firmware`,
+    /// `slice_bytes`, `points`, `known`, the core's board of its
+    /// capabilities, or null), `status` (its last status report: `state`,
+    /// `points`, `refresh_hz`), `progress` (`frames_acked`, `frames`,
+    /// `bytes_acked`, `bytes`, `retransmitted`, `timeouts`) and, once done,
+    /// `report`, `send`'s `key=value` lines.
+    pub fn state(&self) -> String {
+        let mut o = Json::default();
+        let (state, report) = match self.sender.state() {
+            State::Greeting => ("greeting", None),
+            State::Connected => ("connected", None),
+            State::Sending => ("sending", None),
+            State::Picture => ("picture", None),
+            State::Done(r) => ("done", Some(r.report(self.baud))),
+            State::Failed(_) => ("failed", None),
+        };
+        o.str("state", state);
+        o.raw("error", &self.sender.error().map_or("null".into(), |e| quote(&e.to_string())));
+        o.raw(
+            "board",
+            &self.sender.board().map_or("null".into(), |b| {
+                let mut j = Json::default();
+                j.str("firmware", &format!("{}.{}.{}", b.firmware[0], b.firmware[1], b.firmware[2]));
+                j.raw("slice_bytes", &b.max_slice_samples.to_string());
+                j.raw("points", &b.display_points.to_string());
+                j.raw("known", &fit::known_board(b).map_or("null".into(), |k| quote(k.name)));
+                j.end()
+            }),
+        );
+        o.raw(
+            "status",
+            &self.sender.board_status().map_or("null".into(), |(state, points, centi_hz)| {
+                let mut j = Json::default();
+                j.str("state", &format!("{state:?}"));
+                j.raw("points", &points.to_string());
+                j.raw("refresh_hz", &format!("{:.2}", f64::from(centi_hz) / 100.0));
+                j.end()
+            }),
+        );
+        let SendProgress { frames_acked, frames, bytes_acked, bytes, retransmitted, timeouts } =
+            self.sender.progress();
+        let mut j = Json::default();
+        for (k, v) in [
+            ("frames_acked", frames_acked as u64),
+            ("frames", frames as u64),
+            ("bytes_acked", bytes_acked),
+            ("bytes", bytes),
+            ("retransmitted", retransmitted),
+            ("timeouts", u64::from(timeouts)),
+        ] {
+            j.raw(k, &v.to_string());
+        }
+        o.raw("progress", &j.end());
+        o.raw("report", &report.map_or("null".into(), |r| quote(&r)));
+        o.end()
     }
 }
 
@@ -721,6 +924,49 @@ mod tests {
         assert!(s.redraw().is_err());
         assert!(planes("xy,ab").is_err());
         assert!(Scope::with_size(0).is_err());
+    }
+
+    /// The page's link, driven as serial.js drives it (bytes in, bytes
+    /// out, woken at its deadline), puts the page's volume on a board in
+    /// process, with the page's level, and says so in its state.
+    #[test]
+    fn the_link_sends_the_pages_volume_to_a_board() {
+        use isoscope_core::engine::{Engine, EngineConfig};
+        use isoscope_sim::board::{HostBuffers, host_capacity};
+        let mut s = Scope::with_size(32).unwrap();
+        s.demo("hydrogen:12").unwrap();
+        s.set_levels(vec![0.05]);
+        let mut link = Link::new(1000.0, 921_600);
+        assert!(s.send_plan(&mut link, 0.0, 1000.0).is_err(), "sent before the board said hello");
+        let mut mem = HostBuffers::new(&host_capacity(12 * 12 * 4, 16, 20_000));
+        let mut board = Engine::new(EngineConfig::default(), mem.buffers()).unwrap();
+        let mut sent = None;
+        for t in 1000..60_000u32 {
+            let now = f64::from(t);
+            if link.state().contains("\"state\":\"connected\"") && sent.is_none() {
+                sent = Some(s.send_plan(&mut link, 0.0, now).unwrap());
+            }
+            board.feed(&link.transmit(now), t);
+            board.update(t);
+            let mut out = [0u8; 4096];
+            let n = board.transmit(&mut out);
+            link.sender.receive(&out[..n], at(now)).unwrap();
+            link.sender.on_time(at(now)).unwrap();
+            if link.state().contains("\"state\":\"done\"") {
+                break;
+            }
+        }
+        let state = link.state();
+        assert!(state.contains("\"state\":\"done\"") && state.contains("board_state=Showing"), "{state}");
+        assert!(state.contains("\"bytes_acked\":6912,\"bytes\":6912"), "{state}");
+        assert_eq!(
+            sent.unwrap(),
+            "{\"dims\":[12,12,12],\"dtype\":\"F32\",\"every\":1,\"levels\":[0.05],\"notes\":[]}"
+        );
+        assert!(board.surface().is_some());
+        assert_eq!(at(f64::NAN), Duration::ZERO);
+        assert_eq!(at(-5.0), Duration::ZERO);
+        assert!(at(f64::MAX) > Duration::from_secs(1 << 40));
     }
 
     #[test]
