@@ -28,6 +28,7 @@ import zlib
 from pathlib import Path
 
 import web_driver
+import web_serial
 from web_driver import READY, ROOT, click, fail, open_file
 
 web_driver.PROG = "web-test"
@@ -338,6 +339,9 @@ def main():
         if "broken.nrrd" not in shown or "truncated" not in shown:
             fail(f"the broken file's error is not shown clearly: {shown!r}")
         print(f"web-test: a broken file shows: {shown}")
+        # The board over Web Serial: the page's sender against the virtual
+        # board (scripts/web_serial.py).
+        web_serial.check(b, base, sim, tmp, render, data)
     print("web-test: ok")
 
 if __name__ == "__main__":
