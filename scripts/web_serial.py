@@ -261,6 +261,10 @@ def check(b, base, sim, tmp, render, data):
             ("torus 20^3, two planes, frames lost", "demo=torus:20&level=0.3&axes=xy,yz&size=128",
              ["--demo", "torus:20", "--level", "0.3", "--axes", "xy,yz"],
              ["--lose-frame", "1", "--lose-frame", "4", "--lose-frame", "8"]),
+            # One bit in a thousand flipped, both ways (docs/link.md's
+            # noisiest line that 1 KiB chunks still carry).
+            ("gyroid 16^3, a noisy line", "demo=gyroid:16&size=128",
+             ["--demo", "gyroid:16"], ["--flip", "1e-3", "--seed", "7"]),
         ]
         cases = [(name, query, flags, relay, None) for name, query, flags, relay in cases]
         head = data / "brainsmall.den" if data is not None else None
