@@ -23,7 +23,7 @@ pub use driver::{Connection, connect, send_volume};
 #[cfg(not(target_arch = "wasm32"))]
 pub use port::open_port;
 pub use report::{BoardInfo, SendReport};
-pub use sender::{SendError, SendProgress, Sender, State};
+pub use sender::{HELLO_TRIES, HELLO_WAIT, PICTURE_WAIT, SendError, SendProgress, Sender, State};
 pub use volume::{WireVolume, volume_messages};
 
 use anyhow::{Context, Result, anyhow, bail};
