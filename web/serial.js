@@ -66,7 +66,7 @@ export function setupSerial({ call, settings, spinning, showError }) {
   function show(s) {
     api.state = s;
     const lines = [];
-    if (!port) lines.push('not connected');
+    if (!port) lines.push(s.state === 'done' ? 'the port is closed' : 'not connected');
     if (s.board) {
       const known = s.board.known ? ` (an ${s.board.known} by its capabilities)` : '';
       lines.push(`board${known}: firmware ${s.board.firmware}, slices of up to ${fmt(s.board.slice_bytes)} bytes, ` +
