@@ -247,6 +247,29 @@ def send_from_page(b, base, sim, tmp, bridge, name, query, relay=None, file=None
             p.wait()
 
 
+def check_no_answer(b, base, sim, bridge):
+    """A line that loses every byte: the page greets the board three times
+    and then shows send's error."""
+    device, addr = spawn_first_line([sim, "device", "--tcp", "127.0.0.1:0", "--baud", "0"])
+    relay, addr = spawn_first_line([sim, "relay", "--to", addr, "--drop", "1"])
+    try:
+        bridge.board = addr
+        b.send("Page.navigate", {"url": f"{base}?demo=sphere:8&size=64"})
+        b.wait("window.isoscope && window.isoscope.ready && window.isoscope.serial && "
+               "window.isoscope.serial.state === null", "the page for a silent board")
+        click(b, "serial-connect")
+        b.wait("window.isoscope.serial.error !== null", "the page to give up on a silent board", timeout=30)
+        shown = b.eval("document.getElementById('error').hidden ? '' : "
+                       "document.getElementById('error').textContent")
+        if "no answer from the board" not in shown:
+            fail(f"a silent board's error is not shown clearly: {shown!r}")
+        print(f"web-test: a board behind a line that loses every byte: the page shows: {shown}")
+    finally:
+        for p in (relay, device):
+            p.kill()
+            p.wait()
+
+
 def check(b, base, sim, tmp, render, data):
     """The page's sender against the virtual board: a demo on a clean line
     and on a line that loses frames, and a real file if `data` has one."""
@@ -295,5 +318,6 @@ def check(b, base, sim, tmp, render, data):
                   f"({p['bytes']} bytes, {p['frames']} frames, {p['retransmitted']} sent again, "
                   f"{p['timeouts']} timeouts); the board's {board.count(chr(10))} samples equal "
                   f"render --samples, sample for sample")
+        check_no_answer(b, base, sim, bridge)
     finally:
         bridge.stop()
