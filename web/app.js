@@ -9,6 +9,8 @@
 // zoom (0.1 to 1), axes=xy,xz,yz, every=N (0: auto), board=f407, spin=1,
 // size=PIXELS. Tests read window.isoscope (see docs/web.md).
 
+import { setupAudio } from './audio.js';
+
 const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
 const DEFAULT_VIEW = { yaw: 30, pitch: 20, zoom: 0.9 };
@@ -47,6 +49,8 @@ const api = {
   pending: () => dirty || building || loading,
 };
 window.isoscope = api;
+// The picture as XY audio (audio.js).
+const audio = setupAudio(call, api);
 
 // The worker, and the requests it has not answered, oldest first.
 const worker = new Worker(new URL('./worker.js', import.meta.url), { type: 'module' });
@@ -163,6 +167,7 @@ async function redraw() {
       stats = { ...JSON.parse(frame.stats), pixels_ms: frame.pixelsMs };
       api.frameMs = performance.now() - t0;
       api.frames += 1;
+      audio.update();
       showStats();
       if (api.onframe) api.onframe(stats, api.frameMs);
     }
