@@ -131,7 +131,16 @@ export function setupAudio(call, api) {
     if (ctx) ctx.suspend();
   }
 
-  on.addEventListener('change', () => (on.checked ? start() : stop()));
+  on.addEventListener('change', () => {
+    if (!on.checked) return stop();
+    try {
+      return start();
+    } catch (e) {
+      // No AudioContext here (no audio device, or no WebAudio).
+      wanted = false;
+      status.textContent = `no audio: ${e && e.message !== undefined ? e.message : e}`;
+    }
+  });
   volume.addEventListener('input', () => {
     if (gain) gain.gain.value = Number(volume.value);
   });
