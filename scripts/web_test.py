@@ -14,7 +14,10 @@ each scene checks that
   line's files of the scene byte for byte: the PNG `render` writes, its
   `--samples` text, `contour --format svg`'s SVG and `wav`'s WAV;
 - a large volume loads in the page's worker: the page shows the work's
-  progress and its thread never stalls for long meanwhile.
+  progress and its thread never stalls for long meanwhile;
+- "play as audio" hands WebAudio the frame `isoscope-sim wav` writes for
+  the AudioContext's rate (within 1 LSB of its 16-bit PCM), and a new one
+  when the level changes.
 
 Standard library only. Usage: web_test.py SIM_BINARY [DATA_DIR]
 """
@@ -24,6 +27,7 @@ import json
 import subprocess
 import sys
 import time
+import wave
 import zlib
 from pathlib import Path
 
@@ -277,6 +281,53 @@ def check_large(b, sim, tmp):
     check_scene(b, f"{LARGE_DEMO} at the page's view", page_frame(b), flags, sim, tmp, "large")
 
 
+def check_audio(b, base, sim, tmp):
+    """Turn "play as audio" on: the buffer the page hands WebAudio is
+    `wav`'s frame at the AudioContext's rate; a new level, a new one."""
+    b.send("Page.navigate", {"url": f"{base}?demo=hydrogen:32&size={SIZE}"})
+    b.wait(READY, "hydrogen to show for audio")
+    click(b, "audio-on")
+    for level, flags in [(None, []), ("0.2", ["--level", "0.2"])]:
+        if level is not None:
+            frames = b.eval("window.isoscope.audio.frames")
+            b.eval("(() => { const s = document.getElementById('level'); s.value = '0.2'; "
+                   "s.dispatchEvent(new Event('input')); })()")
+            b.wait(f"window.isoscope.audio.frames > {frames} && !window.isoscope.pending()",
+                   "the audio of the new level", timeout=30)
+            # A last request may still be under way for an earlier frame.
+            time.sleep(0.2)
+            b.wait("!window.isoscope.pending()", "the page to settle")
+        else:
+            b.wait("window.isoscope.audio.frames > 0 || "
+                   "document.getElementById('audio-status').textContent.startsWith('no audio')",
+                   "the page to play audio", timeout=30)
+        shown = b.eval("document.getElementById('audio-status').textContent")
+        if shown.startswith("no audio"):
+            fail(f"the page plays no audio: {shown}")
+        rate = b.eval("window.isoscope.audio.rate()")
+        got = base64.b64decode(b.eval("window.isoscope.audio.pcm()"))
+        n = len(got) // 4
+        out = tmp / f"audio{len(flags)}.wav"
+        done = subprocess.run([sim, "wav", "--demo", "hydrogen:32", *flags, "--audio-rate", str(rate), "--seconds",
+                               str(2 * n / rate), "-o", str(out)], check=True, capture_output=True, text=True)
+        with wave.open(str(out)) as w:
+            want = w.readframes(n)
+        g = memoryview(got).cast("h")
+        w = memoryview(want).cast("h")
+        if len(w) != len(g):
+            fail(f"audio: the page's frame is {n} samples, the WAV file's shorter ({len(w) // 2})")
+        worst = max(abs(a - c) for a, c in zip(g, w))
+        said = next(line for line in done.stderr.splitlines() if "wrote" in line)
+        if f"one frame is {n} samples" not in said or worst > 1:
+            fail(f"audio{' at level ' + level if level else ''}: the page's {n}-sample frame at {rate} Hz differs "
+                 f"from wav's by up to {worst} LSB of 16 bits ({said})")
+        print(f"web-test: audio{' at level ' + level if level else ''}: the page plays {n} samples a frame at "
+              f"{rate} Hz ({shown}), within {worst} LSB of `wav --audio-rate {rate}`'s 16-bit PCM")
+    click(b, "audio-on")
+    if b.eval("window.isoscope.audio.playing()"):
+        fail("audio: still playing after turning it off")
+
+
 def main():
     if len(sys.argv) < 2:
         fail("usage: web_test.py SIM_BINARY [DATA_DIR]")
@@ -306,6 +357,7 @@ def main():
         dragged = ["--demo", "hydrogen:32", "--yaw", "50", "--pitch", "30", "--level", "0.2"]
         check_scene(b, "hydrogen 32^3 dragged and at level 0.2", page_frame(b), dragged, sim, tmp, "dragged")
         check_exports(b, "hydrogen 32^3 dragged and at level 0.2", dragged, sim, tmp, "dragged", "hydrogen-32")
+        check_audio(b, base, sim, tmp)
         check_large(b, sim, tmp)
         if data and (data / FILE_SCENE).exists():
             path = data / FILE_SCENE

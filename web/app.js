@@ -10,6 +10,7 @@
 // size=PIXELS. Tests read window.isoscope (see docs/web.md).
 
 import { setupSerial } from './serial.js';
+import { setupAudio } from './audio.js';
 
 const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
@@ -49,6 +50,8 @@ const api = {
   pending: () => dirty || building || loading,
 };
 window.isoscope = api;
+// The picture as XY audio (audio.js).
+const audio = setupAudio(call, api);
 
 // The worker, and the requests it has not answered, oldest first.
 const worker = new Worker(new URL('./worker.js', import.meta.url), { type: 'module' });
@@ -165,6 +168,7 @@ async function redraw() {
       stats = { ...JSON.parse(frame.stats), pixels_ms: frame.pixelsMs };
       api.frameMs = performance.now() - t0;
       api.frames += 1;
+      audio.update();
       showStats();
       if (api.onframe) api.onframe(stats, api.frameMs);
     }

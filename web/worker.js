@@ -87,6 +87,12 @@ const ops = {
   samples() {
     return answer(scope.samples_text());
   },
+  // The frame for a sound card at `rate` (audio.js): X, Y and beam
+  // channels one after the other, and the samples' spacing.
+  audio({ rate }) {
+    const channels = scope.audio(rate);
+    return answer({ channels, step: scope.audio_step() }, [channels.buffer]);
+  },
   export({ kind }) {
     switch (kind) {
       case 'png':

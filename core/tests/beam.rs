@@ -21,7 +21,9 @@
 //! - e. the mock DAC takes exactly the in-range samples.
 
 use isoscope_core::beam::replay::{Kept, Replay};
-use isoscope_core::beam::{BeamConfig, FrameStats, MIN_LIT_STEP, Park, Scheduler, frame_stats, park_samples};
+use isoscope_core::beam::{
+    BeamConfig, FrameStats, MIN_LIT_STEP, Park, Scheduler, Spacing, fit_spacing, frame_stats, park_samples,
+};
 use isoscope_core::command::{Command, CommandSink, Point2};
 use isoscope_core::contour::contour_grid;
 use isoscope_core::contour::grid::Grid2;
@@ -330,6 +332,7 @@ fn valid_config() -> impl Strategy<Value = BeamConfig> {
                 corner_angle_deg,
                 point_dwell,
                 park: Park { x: px % (max + 1), y: py % (max + 1), return_at_end: ret },
+                spacing: Spacing::PerRun,
             }
         })
 }
@@ -361,24 +364,27 @@ fn garbage_config() -> impl Strategy<Value = BeamConfig> {
             prop::sample::select(vec![0u16, 1, 32, 1000, u16::MAX]),
         ),
         (0u16..3, 0u16..3, 0u16..3, float(), 0u16..3),
-        (any::<u16>(), any::<u16>(), any::<bool>()),
+        (any::<u16>(), any::<u16>(), any::<bool>(), any::<bool>()),
     )
-        .prop_map(|((bits, lit_step, settle_base, settle_per_lsb, settle_max), dw, (x, y, ret))| {
-            let (dwell_start, dwell_end, corner_dwell, corner_angle_deg, point_dwell) = dw;
-            BeamConfig {
-                bits,
-                lit_step,
-                settle_base,
-                settle_per_lsb,
-                settle_max,
-                dwell_start,
-                dwell_end,
-                corner_dwell,
-                corner_angle_deg: corner_angle_deg * 50.0,
-                point_dwell,
-                park: Park { x, y, return_at_end: ret },
-            }
-        })
+        .prop_map(
+            |((bits, lit_step, settle_base, settle_per_lsb, settle_max), dw, (x, y, ret, constant))| {
+                let (dwell_start, dwell_end, corner_dwell, corner_angle_deg, point_dwell) = dw;
+                BeamConfig {
+                    bits,
+                    lit_step,
+                    settle_base,
+                    settle_per_lsb,
+                    settle_max,
+                    dwell_start,
+                    dwell_end,
+                    corner_dwell,
+                    corner_angle_deg: corner_angle_deg * 50.0,
+                    point_dwell,
+                    park: Park { x, y, return_at_end: ret },
+                    spacing: if constant { Spacing::Constant } else { Spacing::PerRun },
+                }
+            },
+        )
 }
 
 /// The scheduler's frame of `cmds` recorded (as picture 9) into `mem` as it
@@ -801,7 +807,12 @@ proptest! {
 
     /// c. No gaps: every point of every input segment is near a lit sample.
     #[test]
-    fn segments_are_covered(cfg in valid_config(), cmds in commands(in_range_coord(4095.0), 30)) {
+    fn segments_are_covered(
+        cfg in valid_config(),
+        constant in any::<bool>(),
+        cmds in commands(in_range_coord(4095.0), 30),
+    ) {
+        let cfg = if constant { BeamConfig { spacing: Spacing::Constant, ..cfg } } else { cfg };
         let f = f32::from(cfg.max_code());
         let cmds: Vec<Cmd> = cmds.into_iter().map(|c| c.map(|q| ScreenPoint::new(q.x.min(f), q.y.min(f)))).collect();
         let lit: Vec<Sample> =
@@ -843,6 +854,82 @@ proptest! {
                 }
             }
         }
+    }
+
+    /// f. Constant spacing: consecutive lit samples are at most `lit_step`
+    /// (and rounding) apart unless a dwell repeats one; every polyline's
+    /// start and end, and every dot, is drawn, in order; without corner
+    /// dwells a frame takes its dwells and about its length over
+    /// `lit_step` in lit samples (within one a polyline); `fit_spacing`
+    /// finds a step that fits.
+    #[test]
+    fn constant_spacing(
+        cfg in valid_config(),
+        corner_dwell in 0u16..3,
+        cmds in commands(in_range_coord(4095.0), 40),
+        share in 0.05f64..1.0,
+    ) {
+        let cfg = BeamConfig { spacing: Spacing::Constant, corner_dwell, ..cfg };
+        let max = cfg.max_code();
+        let f = f32::from(max);
+        let cmds: Vec<Cmd> = cmds.into_iter().map(|c| c.map(|q| ScreenPoint::new(q.x.min(f), q.y.min(f)))).collect();
+        let samples: Vec<Sample> = Scheduler::new(cmds.iter().copied(), &cfg).collect();
+        // Spacing, within runs of lit samples.
+        for w in samples.windows(2) {
+            if w[0].beam == Beam::On && w[1].beam == Beam::On {
+                let d = ((f64::from(w[1].x) - f64::from(w[0].x)).powi(2) + (f64::from(w[1].y) - f64::from(w[0].y)).powi(2)).sqrt();
+                prop_assert!(d <= f64::from(cfg.lit_step) + 2f64.sqrt() + 1e-3, "{:?} -> {:?}: {} apart", w[0], w[1], d);
+            }
+        }
+        // Starts, ends and dots, in order: the cleaned polylines.
+        let c = |q: ScreenPoint| (code(q.x, max), code(q.y, max));
+        let mut want: Vec<(u16, u16)> = Vec::new();
+        let (mut pen, mut start, mut drawn): (Option<ScreenPoint>, Option<ScreenPoint>, bool) = (None, None, false);
+        let close = |want: &mut Vec<(u16, u16)>, start: Option<ScreenPoint>, pen: Option<ScreenPoint>, drawn: bool| {
+            if let (true, Some(a), Some(b)) = (drawn, start, pen) {
+                want.push(c(a));
+                want.push(c(b));
+            }
+        };
+        for cmd in &cmds {
+            match *cmd {
+                Command::MoveTo(q) => {
+                    close(&mut want, start, pen, drawn);
+                    (pen, start, drawn) = (Some(q), Some(q), false);
+                }
+                Command::LineTo(q) => match pen {
+                    None => (pen, start, drawn) = (Some(q), Some(q), false),
+                    Some(a) if a == q => {}
+                    Some(_) => (pen, drawn) = (Some(q), true),
+                },
+                Command::Point(q) => {
+                    close(&mut want, start, pen, drawn);
+                    (pen, start, drawn) = (None, None, false);
+                    want.push(c(q));
+                }
+            }
+        }
+        close(&mut want, start, pen, drawn);
+        let mut lit = samples.iter().filter(|s| s.beam == Beam::On).map(|s| (s.x, s.y));
+        for at in &want {
+            prop_assert!(lit.any(|s| s == *at), "{:?} is not drawn (in order)", at);
+        }
+        // The count.
+        let st = frame_stats(cmds.iter().copied(), &cfg);
+        if corner_dwell == 0 {
+            let dwells = u64::from(st.polylines) * u64::from(cfg.dwell_start + cfg.dwell_end)
+                + u64::from(st.points) * u64::from(cfg.point_dwell);
+            let steps = st.lit_samples as f64 - dwells as f64;
+            let ideal = f64::from(st.lit_length) / f64::from(cfg.lit_step);
+            prop_assert!((steps - ideal).abs() <= f64::from(st.polylines) + 1e-3 * ideal,
+                "{} steps for {} LSB at {} a step over {} polylines", steps, st.lit_length, cfg.lit_step, st.polylines);
+        }
+        // Fitting a share of the samples.
+        let budget = (st.samples as f64 * share) as u64;
+        let fit = fit_spacing(cmds.iter().copied(), &cfg, budget);
+        prop_assert!(fit.lit_step >= cfg.lit_step);
+        let fitted = frame_stats(cmds.iter().copied(), &fit).samples;
+        prop_assert!(fitted <= budget || fit.lit_step == (2.0 * (f + 1.0)).max(cfg.lit_step), "{} > {} at {}", fitted, budget, fit.lit_step);
     }
 
     /// e. The mock DAC takes exactly the samples in range, and stops at the

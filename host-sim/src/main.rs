@@ -18,7 +18,7 @@ use isoscope_sim::progress::Progress;
 use isoscope_sim::scene::{self, Scene, SceneConfig, write_samples};
 use isoscope_sim::volume::{DemoSpec, Dims, Dtype, Endian, LoadedVolume, Samples};
 use isoscope_sim::wav::{
-    WavChannels, WavConfig, WavFormat, audio_beam, sample_frames, write_wav_file_counted,
+    WavChannels, WavConfig, WavFormat, audio_beam, audio_frame, sample_frames, write_wav_file_counted,
 };
 use std::io::Write;
 use std::path::PathBuf;
@@ -306,8 +306,18 @@ struct WavArgs {
     /// Seconds of audio (the frame repeats).
     #[arg(long, default_value_t = 5.0)]
     seconds: f64,
-    /// Largest step per sample while lit, in DAC LSB (default: one full-scale
-    /// line per millisecond at the audio rate).
+    /// Refreshes a second to space the samples for: the samples are spread
+    /// evenly along the picture's path, as far apart as it takes for the
+    /// frame to play this many times a second at --audio-rate (or as fast
+    /// as its jumps and dwells let it), and no closer than a full-scale
+    /// line a millisecond. Below about 20 a scope's picture flickers; a
+    /// long picture at a low rate is drawn coarser instead.
+    #[arg(long, default_value_t = isoscope_sim::wav::AUDIO_FPS, value_parser = parse_fps,
+          conflicts_with_all = ["lit_step", "scope_beam"])]
+    fps: f32,
+    /// Samples this far apart along the path, in DAC LSB, whatever the
+    /// refresh rate (instead of --fps; default: one full-scale line a
+    /// millisecond at the audio rate, or wider for --fps).
     #[arg(long)]
     lit_step: Option<f32>,
     /// Add a third channel with the beam for a Z input: +1 blanked, -1 lit
@@ -996,6 +1006,8 @@ fn finish_scene(scene: &Scene, board: &BoardArgs) -> Result<()> {
 }
 
 fn wav(args: &WavArgs) -> Result<()> {
+    // Spaced for --fps unless the spacing or the scope's beam is given.
+    let fit = !(args.scope_beam || args.lit_step.is_some());
     let mut beam = if args.scope_beam {
         BeamConfig { bits: args.view.bits, ..BeamConfig::default() }
     } else {
@@ -1011,7 +1023,11 @@ fn wav(args: &WavArgs) -> Result<()> {
     let (volume, mut cfg) = prepare(&args.input, &args.view, &args.board, beam, None, true)?;
     // The frame plays at the audio rate: its refresh rate is counted at it.
     cfg.sample_rate_hz = args.audio_rate;
-    let scene = draw(&volume, &cfg)?;
+    let mut scene = draw(&volume, &cfg)?;
+    if fit {
+        let frame = audio_frame(&scene.commands, &cfg.beam, args.audio_rate, Some(args.fps));
+        (scene.samples, scene.frame, beam) = (frame.samples, frame.stats, frame.beam);
+    }
     finish_scene(&scene, &args.board)?;
     let wcfg = WavConfig {
         rate_hz: args.audio_rate,
@@ -1027,14 +1043,33 @@ fn wav(args: &WavArgs) -> Result<()> {
         Progress::new("writing audio (sample frames)", usize::try_from(length).unwrap_or(usize::MAX));
     let st = write_wav_file_counted(&args.output, &scene.samples, &wcfg, Some(&writing))?;
     eprintln!(
-        "isoscope-sim: wrote {} ({:.2} s at {} Hz, {} channels; one frame is {} samples: {:.1} frames/s)",
+        "isoscope-sim: wrote {} ({:.2} s at {} Hz, {} channels; one frame is {} samples, {:.1} LSB apart: \
+         {:.1} frames/s)",
         args.output.display(),
         st.seconds,
         args.audio_rate,
         if args.beam_channel { 3 } else { 2 },
         st.frame_samples,
+        beam.lit_step,
         st.refresh_hz
     );
+    let span = f32::from(beam.max_code()) + 1.0;
+    if !fit && st.refresh_hz < f64::from(isoscope_sim::scene::FLICKER_HZ) && scene.frame.lit_samples > 0 {
+        eprintln!(
+            "isoscope-sim: warning: {:.1} frames/s: drop {} to space the samples for {} frames/s (--fps)",
+            st.refresh_hz,
+            if args.scope_beam { "--scope-beam" } else { "--lit-step" },
+            isoscope_sim::wav::AUDIO_FPS
+        );
+    } else if fit && beam.lit_step > span / 32.0 {
+        eprintln!(
+            "isoscope-sim: note: at {:.0} frames/s the samples are {:.0} LSB apart ({:.1}% of the screen), a \
+             coarse picture: a higher --audio-rate, a lower --fps or fewer slices (--every) draw it finer",
+            st.refresh_hz,
+            beam.lit_step,
+            100.0 * beam.lit_step / span
+        );
+    }
     if st.clipped > 0 {
         eprintln!("isoscope-sim: warning: {} samples were outside the DAC range and clipped", st.clipped);
     }
@@ -1227,6 +1262,14 @@ fn relay(args: &RelayArgs) -> Result<()> {
 }
 
 /// A probability: a number from 0 to 1.
+fn parse_fps(s: &str) -> Result<f32, String> {
+    let f: f32 = s.trim().parse().map_err(|_| format!("`{s}` is not a number"))?;
+    if !(f.is_finite() && f > 0.0) {
+        return Err(format!("`{s}` is not a refresh rate: give a positive number of frames a second"));
+    }
+    Ok(f)
+}
+
 fn parse_probability(s: &str) -> Result<f64, String> {
     let p: f64 = s.trim().parse().map_err(|_| format!("`{s}` is not a number"))?;
     if !(0.0..=1.0).contains(&p) {

@@ -32,38 +32,45 @@
 //! Codes above the top code (a stream made for more bits) are clamped to
 //! +1.0 and counted in [`WavStats::clipped`].
 //!
-//! # Sample rate and beam speed
+//! # Sample rate, spacing and refresh rate
 //!
 //! Each DAC sample becomes one audio sample frame at
 //! [`WavConfig::rate_hz`]. The scheduler's [default beam](BeamConfig::default)
-//! is for a 1 MS/s DAC and a ~1 MHz scope: 17 LSB a sample. A sound card at
-//! 48 kHz (passband ~20 kHz, its reconstruction filter rounding anything
-//! faster) cannot follow that, and at 17 LSB a sample a frame would last 21
-//! times longer than on the scope's DAC (the hydrogen demo: 17,300 samples,
-//! 0.36 s a frame). Schedule the frame with [`audio_beam`] instead: the same
-//! beam *speed* at every rate, a full-scale line in 1 ms (`lit_step` = 85
-//! LSB at 48 kHz and 12 bits, 43 at 96 kHz, 21 at 192 kHz). A larger
-//! `lit_step` refreshes faster and rounds corners more (at 48 kHz a corner
-//! is rounded over about one step); a higher rate gives finer steps.
+//! is for a 1 MS/s DAC and a ~1 MHz scope: 17 LSB a sample, a run of
+//! samples ending at every corner. A sound card at 48 kHz (passband ~20
+//! kHz, its reconstruction filter rounding anything faster) cannot follow
+//! that, and at 17 LSB a sample a frame would last 21 times longer than on
+//! the scope's DAC (the hydrogen demo: 17,300 samples, 0.36 s a frame).
+//! Schedule the frame with [`audio_beam`] instead: samples spaced evenly
+//! along each polyline, corners or not ([`Spacing::Constant`]: the card
+//! rounds corners anyway), at least as far apart as a beam drawing a
+//! full-scale line in 1 ms (85 LSB at 48 kHz and 12 bits, 43 at 96 kHz,
+//! 21 at 192 kHz); then [`audio_frame`] widens the spacing until the
+//! frame plays [`AUDIO_FPS`] (25) times a second at the rate. A frame then
+//! lasts about its length over the spacing: a higher rate gives finer
+//! steps at the same refresh rate; a long picture at a low rate is drawn
+//! with coarser steps rather than flickering.
 //!
-//! The scheduler spends samples by path length (a contour's segments,
-//! about a voxel long, shorter than a step, take none of their own), so a
-//! frame lasts about its length over the beam speed whatever the rate.
-//! Measured frames of the hydrogen demo (level 0.1, default view) with
-//! [`audio_beam`] (`isoscope-sim wav --demo hydrogen:N --every E
-//! --audio-rate R`, 2026-12-03):
+//! Measured frames of the hydrogen demo (level 0.1, default view;
+//! `isoscope-sim wav --demo hydrogen:N --every E --audio-rate R`, with
+//! `--lit-step` for the fixed speed, 2026-12-06; before the constant
+//! spacing, runs at the fixed speed gave 13.1 fps at 48 kHz and 13.8 at
+//! 192 kHz for `hydrogen:32`):
 //!
-//! | volume | 48 kHz | 96 kHz | 192 kHz |
-//! |---|---|---|---|
-//! | `hydrogen:32` | 3,667 samples, 13.1 fps | 7,068, 13.6 fps | 13,873, 13.8 fps |
-//! | `hydrogen:32`, every 2nd slice | 1,872, 25.6 fps | 3,581, 26.8 fps | 6,993, 27.5 fps |
-//! | `hydrogen:32`, every 3rd slice | 1,228, 39.1 fps | 2,343, 41.0 fps | 4,570, 42.0 fps |
-//! | `hydrogen:16` | 1,815, 26.4 fps | 3,422, 28.1 fps | 6,618, 29.0 fps |
+//! | volume | fixed speed, 48 kHz | 96 kHz | 192 kHz | spaced for 25 fps (default) |
+//! |---|---|---|---|---|
+//! | `hydrogen:32` | 3,412 samples, 14.1 fps | 6,812, 14.1 fps | 13,611, 14.1 fps | 153 LSB apart at 48 kHz, 76 at 96, 38 at 192 |
+//! | `hydrogen:32`, every 2nd slice | 1,720, 27.9 fps | | 6,839, 28.1 fps | (fast enough at the fixed speed) |
+//! | `hydrogen:32`, every 3rd slice | 1,128, 42.6 fps | | 4,470, 43.0 fps | (fast enough) |
+//! | `hydrogen:16` | 1,600, 30.0 fps | | | (fast enough) |
 //!
 //! A P31 screen in a dim room shows a readable, flickering picture from
-//! about 15 frames a second and a steady one from about 40: contour fewer
-//! slices (`every`) or a coarser volume for a sound card.
-//!
+//! about 15 frames a second and a steady one from about 40. At 48 kHz
+//! `hydrogen:32` at 25 fps has its samples 3.7% of the screen apart (the
+//! command says so, as a note above 1/32 of the screen): its contours
+//! are visibly polygonal; contour fewer slices (`every`), use a higher
+//! rate or ask for fewer frames a second for a finer picture.
+
 //! # Looping
 //!
 //! [`write_wav`] takes one frame of samples and repeats it until
@@ -90,8 +97,10 @@
 //! assert_eq!(stats.sample_frames, 480); // 10 ms at 48 kHz
 //! ```
 
-use isoscope_core::beam::{BeamConfig, MIN_LIT_STEP};
+use isoscope_core::beam::{BeamConfig, FrameStats, MIN_LIT_STEP, Scheduler, Spacing, fit_spacing};
+use isoscope_core::command::Command;
 use isoscope_core::output::{Beam, Sample};
+use isoscope_core::view::ScreenPoint;
 use std::fmt;
 use std::io::{BufWriter, Seek, Write};
 use std::path::Path;
@@ -263,9 +272,12 @@ pub const AUDIO_FULL_SCALES_PER_SECOND: f64 = 1000.0;
 /// - a blanked jump settles 40 µs plus 40 µs per full scale (at least one
 ///   sample; 2 + 2 at 48 kHz): the card's reconstruction filter rings for
 ///   a few samples after a step, longer the larger it is;
-/// - one sample of dwell at polyline ends and sharp corners (at 48 kHz a
-///   sample lasts 21 µs, as long as 20 samples of the scope's DAC), none
-///   at a polyline's start beyond the required one;
+/// - [`Spacing::Constant`]: samples evenly along each polyline, corners
+///   or not (the card's low-pass rounds a corner over a sample or two
+///   anyway), none at a corner of its own;
+/// - one sample of dwell at polyline ends (at 48 kHz a sample lasts
+///   21 µs, as long as 20 samples of the scope's DAC), none at a
+///   polyline's start beyond the required one;
 /// - a dot dwells 80 µs (4 samples at 48 kHz).
 ///
 /// Everything else (corner angle, park position) is
@@ -285,10 +297,73 @@ pub fn audio_beam(rate_hz: u32, bits: u8) -> BeamConfig {
         settle_max: (2.0 * settle) as u16,
         dwell_start: 1,
         dwell_end: 1,
-        corner_dwell: 1,
+        corner_dwell: 0,
         point_dwell: samples(80e-6) as u16,
+        spacing: Spacing::Constant,
         ..BeamConfig::default()
     }
+}
+
+/// Refreshes a second that `wav` and the web page's audio space a frame's
+/// samples for by default ([`audio_frame`]): [`FLICKER_HZ`](crate::scene::FLICKER_HZ),
+/// below which a scope's picture flickers.
+pub const AUDIO_FPS: f32 = crate::scene::FLICKER_HZ;
+
+/// A frame scheduled for a sound card: [`audio_frame`]'s answer.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AudioFrame {
+    /// The beam it was scheduled with (its `lit_step` the spacing chosen).
+    pub beam: BeamConfig,
+    /// The frame's samples, from the park position back to it.
+    pub samples: Vec<Sample>,
+    /// Its statistics.
+    pub stats: FrameStats,
+}
+
+/// `commands` (a scene's, [`crate::scene::Scene::commands`]) scheduled
+/// with `beam`; with `fps`, at the smallest spacing of at least
+/// `beam.lit_step` at which the frame plays `fps` times a second or more
+/// at `rate_hz` ([`fit_spacing`]: at most `floor(rate_hz / fps)`
+/// samples), or as fast as its jumps and dwells let it. With
+/// [`audio_beam`] the samples are spaced evenly along the path
+/// ([`Spacing::Constant`]) and a picture too long for the rate is drawn
+/// with fewer, farther samples rather than refreshed too slowly. An `fps`
+/// that is not positive and finite is none.
+///
+/// The same samples as the board's scheduler would make with the beam
+/// returned (the engine schedules its commands with [`Scheduler::new`]).
+pub fn audio_frame(
+    commands: &[Command<ScreenPoint>],
+    beam: &BeamConfig,
+    rate_hz: u32,
+    fps: Option<f32>,
+) -> AudioFrame {
+    let mut beam = beam.sanitized();
+    if let Some(fps) = fps.filter(|f| f.is_finite() && *f > 0.0) {
+        let max = (f64::from(rate_hz) / f64::from(fps)).floor().max(1.0) as u64;
+        beam = fit_spacing(commands.iter().copied(), &beam, max);
+    }
+    let mut sch = Scheduler::new(commands.iter().copied(), &beam);
+    let samples: Vec<Sample> = sch.by_ref().collect();
+    AudioFrame { beam, samples, stats: sch.stats() }
+}
+
+/// A frame's samples as an audio buffer's channels at full scale, one
+/// after the other: X, then Y, then the beam (blanked +1.0, lit -1.0;
+/// inverted with `blank_active_low`), `frame.len()` values each: the
+/// values [`write_wav`] writes (its 16-bit PCM is `round(v * 32767)` of
+/// these), for a player that takes floats (the web page's WebAudio).
+pub fn audio_channels(frame: &[Sample], bits: u8, blank_active_low: bool) -> Vec<f32> {
+    let x = frame.iter().map(|s| code_to_unit(s.x, bits) as f32);
+    let y = frame.iter().map(|s| code_to_unit(s.y, bits) as f32);
+    let beam = frame.iter().map(|s| beam_to_unit(s.beam, blank_active_low) as f32);
+    x.chain(y).chain(beam).collect()
+}
+
+/// The beam channel's value: blanked +1.0 and lit -1.0 (Z high blanks),
+/// the other way round with `blank_active_low`.
+pub fn beam_to_unit(beam: Beam, blank_active_low: bool) -> f64 {
+    if (beam == Beam::Off) != blank_active_low { 1.0 } else { -1.0 }
 }
 
 /// DAC code `code` of a `bits` DAC as a value in `-1.0 ..= 1.0`:
@@ -369,8 +444,7 @@ pub fn write_wav_counted<W: Write + Seek>(
     let total = sample_frames(cfg, frame.len())?;
     let max = u16::MAX >> (16 - cfg.bits);
     let clipped = frame.iter().filter(|s| s.x > max || s.y > max).count();
-    // Blanked is high unless the Z input blanks low.
-    let beam = |b: Beam| if (b == Beam::Off) != cfg.blank_active_low { 1.0 } else { -1.0 };
+    let beam = |b: Beam| beam_to_unit(b, cfg.blank_active_low);
     // The frame's values, once: then the loop only copies.
     let with_beam = cfg.channels == WavChannels::WithBeam;
     let values: Vec<f64> = frame
@@ -755,6 +829,45 @@ mod tests {
     }
 
     #[test]
+    fn audio_frames_fit_the_refresh_rate() {
+        // A 100-LSB circle of 360 chords, 20 times over: about 12,600 LSB.
+        let mut cmds = Vec::new();
+        for k in 0..20 {
+            let c = (500.0 + 150.0 * k as f32, 2000.0);
+            cmds.push(Command::MoveTo(ScreenPoint::new(c.0 + 100.0, c.1)));
+            for i in 1..=360 {
+                let a = (i as f32).to_radians();
+                cmds.push(Command::LineTo(ScreenPoint::new(c.0 + 100.0 * a.cos(), c.1 + 100.0 * a.sin())));
+            }
+        }
+        let beam = audio_beam(48_000, 12);
+        let slow = audio_frame(&cmds, &beam, 48_000, None);
+        assert_eq!(slow.beam, beam);
+        assert_eq!(slow.samples.len() as u64, slow.stats.samples);
+        // 85 LSB a sample: about 148 samples of path, plus about 6 a
+        // circle for its jump and ends; 200 frames/s is 240 samples.
+        assert!(slow.stats.samples > 240, "{}", slow.stats.samples);
+        let fit = audio_frame(&cmds, &beam, 48_000, Some(200.0));
+        assert!(fit.stats.samples <= 240, "{}", fit.stats.samples);
+        assert!(fit.beam.lit_step > beam.lit_step);
+        assert_eq!(BeamConfig { lit_step: beam.lit_step, ..fit.beam }, beam);
+        // Already fast enough: unchanged.
+        assert_eq!(audio_frame(&cmds, &beam, 48_000, Some(10.0)), slow);
+        // No refresh rate to fit: as none.
+        assert_eq!(audio_frame(&cmds, &beam, 48_000, Some(f32::NAN)), slow);
+        // The channels, as the WAV file's values.
+        let ch = audio_channels(&fit.samples, 12, false);
+        let n = fit.samples.len();
+        assert_eq!(ch.len(), 3 * n);
+        for (i, s) in fit.samples.iter().enumerate() {
+            assert_eq!(f64::from(ch[i]), code_to_unit(s.x, 12) as f32 as f64);
+            assert_eq!(f64::from(ch[n + i]), code_to_unit(s.y, 12) as f32 as f64);
+            assert_eq!(ch[2 * n + i], if s.beam == OFF { 1.0 } else { -1.0 });
+        }
+        assert_eq!(audio_channels(&fit.samples, 12, true)[2 * n], -ch[2 * n]);
+    }
+
+    #[test]
     fn the_audio_beam_is_valid_and_keeps_its_speed() {
         for rate in [1, 8000, 44_100, 48_000, 96_000, 192_000, 1_000_000, u32::MAX] {
             for bits in [1, 8, 12, 16] {
@@ -772,6 +885,7 @@ mod tests {
         let b = audio_beam(48_000, 12);
         assert!((b.lit_step - 85.333).abs() < 0.01, "{}", b.lit_step);
         assert_eq!((b.settle_base, b.settle_samples(4096.0), b.point_dwell), (2.0, 4, 4));
+        assert_eq!((b.spacing, b.corner_dwell), (Spacing::Constant, 0));
         assert_eq!(audio_beam(0, 40), audio_beam(1, 16));
     }
 }

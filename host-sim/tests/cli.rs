@@ -1304,6 +1304,56 @@ fn an_empty_picture_says_why_and_what_to_draw() {
     assert!(!err.contains("empty"), "{err}");
 }
 
+/// `wav` spaces the samples for 25 frames/s unless told otherwise, says
+/// the spacing and frame rate, and says which option fixes a flickering
+/// one.
+#[test]
+fn wav_spaces_the_samples_for_the_refresh_rate() {
+    let dir = TempDir::new("wav-fps");
+    let wav = path_str(&dir.0.join("f.wav"));
+    let wrote = |args: &[&str]| -> (f64, f64, String) {
+        let all: Vec<&str> = ["wav", "--demo", "hydrogen:24", "--seconds", "0.01", "-o", &wav]
+            .into_iter()
+            .chain(args.iter().copied())
+            .collect();
+        let out = run(&all);
+        assert!(out.status.success(), "{all:?}: {}", said(&out));
+        let err = said(&out);
+        let line = err.lines().find(|l| l.contains("wrote")).unwrap_or_else(|| panic!("{err}")).to_string();
+        let num = |after: &str, before: &str| -> f64 {
+            let tail = line.split(before).next().unwrap();
+            tail.rsplit(after).next().unwrap().trim().parse().unwrap_or_else(|_| panic!("{line}"))
+        };
+        (num(",", " LSB apart"), num(":", " frames/s"), err)
+    };
+    // The default: 25 frames/s at 48 kHz, the samples farther apart than
+    // a full-scale line a millisecond (85.3 LSB).
+    let (apart, fps, err) = wrote(&[]);
+    assert!(apart > 86.0 && (25.0..26.0).contains(&fps), "{err}");
+    assert!(!err.contains("flickers"), "{err}");
+    // A higher rate: the same refresh, finer steps.
+    let (fine, fps, _) = wrote(&["--audio-rate", "192000"]);
+    assert!(fine < apart / 3.0 && (25.0..25.5).contains(&fps), "{fine} {fps}");
+    // Asked for 40.
+    let (_, fps, _) = wrote(&["--fps", "40"]);
+    assert!((40.0..41.0).contains(&fps), "{fps}");
+    // A spacing given: the frame rate follows, and the warning says what
+    // gives the default back.
+    let (apart, fps, err) = wrote(&["--lit-step", "85.3"]);
+    assert!(apart == 85.3 && fps < 20.0, "{err}");
+    assert!(
+        err.contains("warning: ")
+            && err.contains("drop --lit-step to space the samples for 25 frames/s (--fps)"),
+        "{err}"
+    );
+    let err = said(&run(&["wav", "--demo", "sphere:8", "--lit-step", "20", "--fps", "30", "-o", &wav]));
+    assert!(err.contains("cannot be used with"), "{err}");
+    for bad in ["0", "-3", "inf", "x"] {
+        let out = run(&["wav", "--demo", "sphere:8", "--fps", bad, "-o", &wav]);
+        assert!(!out.status.success() && said(&out).contains(bad), "{bad}: {}", said(&out));
+    }
+}
+
 /// A frame that refreshes below 25 times a second is said to flicker, at
 /// the rate it plays (a WAV file's audio rate, the DAC's for the others),
 /// with the ways to shorten it that apply; a steady one is not.
@@ -1311,10 +1361,11 @@ fn an_empty_picture_says_why_and_what_to_draw() {
 fn a_flickering_picture_is_said_to_flicker() {
     let dir = TempDir::new("flicker");
     let (wav, png) = (path_str(&dir.0.join("f.wav")), path_str(&dir.0.join("f.png")));
-    // hydrogen:24 at 48 kHz: about 10 frames/s; every 3rd slice is above 25.
+    // hydrogen:24 at 48 kHz: about 10 frames/s with the samples 85 LSB
+    // apart; every 3rd slice is above 25.
     let base = ["--demo", "hydrogen:24"];
     for args in [
-        vec!["wav", "--seconds", "0.01", "-o", &wav],
+        vec!["wav", "--seconds", "0.01", "--lit-step", "85.3", "-o", &wav],
         vec!["render", "--size", "32", "--rate", "40000", "-o", &png],
         vec!["stats", "--rate", "40000"],
     ] {

@@ -43,7 +43,9 @@ use isoscope_sim::phosphor::{Phosphor, PhosphorConfig};
 use isoscope_sim::progress::Progress;
 use isoscope_sim::scene::{self, Scene, SceneConfig};
 use isoscope_sim::volume::{DemoSpec, Dims, LoadedVolume};
-use isoscope_sim::wav::{WavConfig, audio_beam, write_wav};
+use isoscope_sim::wav::{
+    AUDIO_FPS, AudioFrame, WavConfig, audio_beam, audio_channels, audio_frame, write_wav,
+};
 use std::fmt::Write as _;
 use std::time::Duration;
 use wasm_bindgen::prelude::*;
@@ -100,6 +102,8 @@ pub struct Scope {
     build_ms: f64,
     draw_ms: f64,
     screen: Phosphor,
+    /// The spacing of the last [`Scope::audio`] frame.
+    audio_step: f32,
 }
 
 /// What decides whether a surface fits a memory: every setting but the
@@ -307,6 +311,28 @@ impl Scope {
         self.send_plan(link, spin, now_ms).map_err(js)
     }
 
+    /// The frame for a sound card playing at `rate_hz` (the page's
+    /// AudioContext's rate), as `isoscope-sim wav --audio-rate RATE`
+    /// draws it with its defaults ([`audio_beam`], spaced for
+    /// [`AUDIO_FPS`] frames a second: [`audio_frame`]): X, then Y, then
+    /// the beam (blanked +1, lit -1), one frame's samples each, at full
+    /// scale +-1 ([`audio_channels`]: the WAV file's values). Its spacing
+    /// is [`Scope::audio_step`] then.
+    ///
+    /// # Errors
+    /// No frame drawn for the settings.
+    pub fn audio(&mut self, rate_hz: u32) -> Result<Vec<f32>, JsError> {
+        let frame = self.audio_frame(rate_hz).map_err(js)?;
+        self.audio_step = frame.beam.lit_step;
+        Ok(audio_channels(&frame.samples, frame.beam.bits, false))
+    }
+
+    /// The spacing of the samples of the last [`Scope::audio`], in DAC
+    /// LSB along the path (0 before).
+    pub fn audio_step(&self) -> f32 {
+        self.audio_step
+    }
+
     /// The volume as JSON: `name`, `dims`, `dtype`, `range` (or null),
     /// `histogram`, `suggested` and `default_levels`, and the readers'
     /// `notes`; `null` with no volume.
@@ -375,6 +401,7 @@ impl Scope {
             build_ms: 0.0,
             draw_ms: 0.0,
             screen,
+            audio_step: 0.0,
         })
     }
 
@@ -592,14 +619,22 @@ impl Scope {
         let wire = self.wire()?;
         let cfg = self.config(wire);
         // `wav`'s defaults: its --audio-rate and --seconds are
-        // `WavConfig`'s, its beam is made for that rate.
+        // `WavConfig`'s, its frame scheduled for that rate as `wav` does.
         let wav = WavConfig { bits: cfg.view.bits, ..WavConfig::default() };
-        let cfg = SceneConfig { beam: audio_beam(wav.rate_hz, cfg.view.bits), ..cfg };
-        let built = self.build(wire, &cfg)?;
+        let frame = self.audio_frame(wav.rate_hz)?;
         report("writing the WAV file", 0, 0);
         let mut out = std::io::Cursor::new(Vec::new());
-        write_wav(&mut out, &built.samples, &wav)?;
+        write_wav(&mut out, &frame.samples, &wav)?;
         Ok(out.into_inner())
+    }
+
+    /// The shown frame's commands scheduled for a sound card at `rate_hz`
+    /// as `isoscope-sim wav` schedules them by default (the commands do
+    /// not depend on the beam: `wav` builds the same ones).
+    fn audio_frame(&self, rate_hz: u32) -> Result<AudioFrame> {
+        let shown = self.shown()?;
+        let beam = audio_beam(rate_hz, self.config(self.wire()?).view.bits);
+        Ok(audio_frame(&shown.commands, &beam, rate_hz, Some(AUDIO_FPS)))
     }
 
     fn redraw(&mut self) -> Result<()> {
@@ -855,6 +890,10 @@ mod tests {
         let mut wav = std::io::Cursor::new(Vec::new());
         write_wav(&mut wav, &audio.samples, &WavConfig::default()).unwrap();
         assert_eq!(s.wav_bytes().unwrap(), wav.into_inner());
+        // The sound card's frame is the same one (the scene's commands do
+        // not depend on the beam), as channels.
+        assert_eq!(s.audio(48_000).expect("a frame"), audio_channels(&audio.samples, 12, false));
+        assert_eq!(s.audio_step(), audio_beam(48_000, 12).lit_step);
         // A change of settings not drawn yet: nothing to export.
         s.set_levels(vec![0.5]);
         assert!(s.png_bytes().is_err());

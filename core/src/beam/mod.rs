@@ -80,6 +80,16 @@
 //!   - if the polyline ends at `p` (the next command is not a `LineTo`, or
 //!     there is none): a sample at `p` and `dwell_end` more.
 //!
+//!   With [`Spacing::Constant`] (for audio rates) a corner does not end
+//!   the run: the steps go on every `lit_step` along the whole polyline,
+//!   a vertex gets no sample of its own, and only the polyline's end does
+//!   (and `dwell_end` more); with a `corner_dwell` above 0 a corner still
+//!   gets a sample and its dwell, but the next step falls where it would
+//!   have without them. A polyline of length `T` then takes `ceil(T /
+//!   lit_step)` lit samples besides its dwells, wherever its vertices are
+//!   ([`fit_spacing`] picks the `lit_step` that fits a frame into a number
+//!   of samples).
+//!
 //!   Positions are computed in fixed point (1/32768 LSB; each step
 //!   truncated toward the segment's start, so the `k`-th step of a segment
 //!   lags its exact place by less than `k` / 32768 LSB, under 0.015 LSB at
@@ -162,7 +172,7 @@ mod scheduler;
 mod stats;
 
 pub use scheduler::{LitSteps, Scheduler};
-pub use stats::{FrameStats, frame_stats};
+pub use stats::{FrameStats, fit_spacing, frame_stats};
 
 use crate::fastmath::ceil;
 use crate::output::{Beam, Sample};
@@ -250,6 +260,36 @@ pub struct BeamConfig {
     pub point_dwell: u16,
     /// The park position and whether frames return there.
     pub park: Park,
+    /// How lit samples are spaced along a polyline: [`Spacing::PerRun`]
+    /// (a run of steps ends at every corner, for a scope's DAC) or
+    /// [`Spacing::Constant`] (one even spacing along the whole polyline,
+    /// for a sound card).
+    pub spacing: Spacing,
+}
+
+/// How the scheduler spaces a polyline's lit samples (see the [module
+/// docs](self)).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Spacing {
+    /// Runs: a sample every `lit_step` along the path from a polyline's
+    /// start or a corner to the next corner or its end, where a sample
+    /// falls exactly (and [`BeamConfig::corner_dwell`] more), so corners
+    /// stay sharp on a fast scope. A run of length `T` takes
+    /// `ceil(T / lit_step)` samples. The default, and the firmware's.
+    #[default]
+    PerRun,
+    /// Constant: a sample every `lit_step` along the whole polyline,
+    /// across its corners, and one at its end; a vertex gets no sample of
+    /// its own unless [`BeamConfig::corner_dwell`] is above 0 and it is a
+    /// corner (a sample there and its dwell, the steps' spacing going on
+    /// from where it was). A polyline of length `T` takes `ceil(T /
+    /// lit_step)` lit samples besides its dwells, at most `lit_step`
+    /// apart along the path. For audio rates: a sound card's low-pass
+    /// (about 0.45 times its rate) rounds corners anyway, and samples go
+    /// where the path is, not where its vertices are, so the frame lasts
+    /// its length over `lit_step` (see [`fit_spacing`]).
+    Constant,
 }
 
 impl Default for BeamConfig {
@@ -280,6 +320,7 @@ impl Default for BeamConfig {
     ///   (contours that pinch to a node) stay visible.
     /// - `park`: [`Park::default`], the corner `(0, 0)`, returning there at
     ///   the end of each frame.
+    /// - `spacing`: [`Spacing::PerRun`].
     fn default() -> Self {
         Self {
             bits: 12,
@@ -293,6 +334,7 @@ impl Default for BeamConfig {
             corner_angle_deg: 60.0,
             point_dwell: 4,
             park: Park::default(),
+            spacing: Spacing::PerRun,
         }
     }
 }
@@ -424,6 +466,7 @@ impl BeamConfig {
             corner_angle_deg,
             point_dwell: self.point_dwell.max(1),
             park: Park { x: self.park.x.min(max), y: self.park.y.min(max), ..self.park },
+            spacing: self.spacing,
         }
     }
 
@@ -510,6 +553,7 @@ mod tests {
         assert_eq!((d.dwell_start, d.dwell_end, d.corner_dwell, d.point_dwell), (2, 1, 1, 4));
         assert_eq!(d.corner_angle_deg, 60.0);
         assert_eq!(d.park, Park { x: 0, y: 0, return_at_end: true });
+        assert_eq!(d.spacing, Spacing::PerRun);
         // Full-scale jump: 2 + 16 samples; the diagonal 2 + 22.6 -> 25.
         assert_eq!(d.settle_samples(4096.0), 18);
         assert_eq!(d.settle_samples(4095.0 * core::f32::consts::SQRT_2), 25);
@@ -555,12 +599,13 @@ mod tests {
             corner_angle_deg: -5.0,
             point_dwell: 0,
             park: Park { x: u16::MAX, y: 7, return_at_end: false },
+            spacing: Spacing::Constant,
         };
         let s = garbage.sanitized();
         assert_eq!(s.validate(), Ok(()));
         assert_eq!((s.bits, s.lit_step, s.corner_angle_deg), (16, MIN_LIT_STEP, 0.0));
         assert_eq!((s.settle_base, s.settle_per_lsb), (2.0, 1.0 / 256.0));
-        assert_eq!((s.dwell_start, s.point_dwell), (1, 1));
+        assert_eq!((s.dwell_start, s.point_dwell, s.spacing), (1, 1, Spacing::Constant));
         let s = BeamConfig { bits: 0, lit_step: f32::NAN, ..garbage }.sanitized();
         assert_eq!(s.validate(), Ok(()));
         assert_eq!((s.bits, s.lit_step, s.park.x), (1, 17.0, 1));

@@ -1,7 +1,7 @@
 //! The beam scheduler itself: [`Scheduler`], commands in, samples out, as
 //! the [module docs](super) describe.
 
-use super::{BeamConfig, FrameStats};
+use super::{BeamConfig, FrameStats, Spacing};
 use crate::command::Command;
 use crate::fastmath::{sqrt, sqrt_recip};
 use crate::output::{Beam, Each, RunSink, Sample, SampleSource, Steps};
@@ -204,8 +204,12 @@ pub struct Scheduler<I> {
     ahead: Option<Step>,
     cfg: BeamConfig,
     /// `cos(corner_angle_deg)`: a vertex is a corner when the cosine of its
-    /// turn is below this.
+    /// turn is below this (-2, never, for [`Spacing::Constant`] without a
+    /// corner dwell: its corners take no sample).
     corner_cos: f32,
+    /// [`Spacing::Constant`]: the steps' spacing goes on across a corner's
+    /// sample rather than starting again after it.
+    keep_phase: bool,
     /// [`BeamConfig::segment_cap`].
     cap: u32,
     /// `1 / lit_step`.
@@ -252,7 +256,13 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
         } else {
             Pos { x: f32::from(park.x), y: f32::from(park.y) }
         };
-        let corner_cos = libm::cosf(cfg.corner_angle_deg * (core::f32::consts::PI / 180.0));
+        let keep_phase = cfg.spacing == Spacing::Constant;
+        let corner_cos = if keep_phase && cfg.corner_dwell == 0 {
+            // Below any cosine: no vertex is a corner.
+            -2.0
+        } else {
+            libm::cosf(cfg.corner_angle_deg * (core::f32::consts::PI / 180.0))
+        };
         let mut src = Clean { src: commands.into_iter(), pen: None, max, skipped: 0 };
         let ahead = src.next_step();
         Self {
@@ -263,6 +273,7 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
             ahead_by: cfg.lit_step,
             cfg,
             corner_cos,
+            keep_phase,
             pos: start,
             fixed: (Walk::fixed(start.x), Walk::fixed(start.y)),
             lit: false,
@@ -364,7 +375,12 @@ impl<I: Iterator<Item = Command<ScreenPoint>>> Scheduler<I> {
             if n > 0 && next - s >= length {
                 n -= 1;
             }
-            self.ahead_by = s;
+            // A new run starts a whole step on; with constant spacing the
+            // steps go on where they fall (a polyline's end is followed by
+            // a jump, which starts them again).
+            if !self.keep_phase {
+                self.ahead_by = s;
+            }
         }
         let n = n.min(self.cap);
         if n == 0 {
@@ -636,6 +652,7 @@ mod tests {
             corner_angle_deg: 45.0,
             point_dwell: 2,
             park: Park { x: 0, y: 0, return_at_end: true },
+            spacing: Spacing::PerRun,
         };
         let s = run(&[m(8.0, 0.0), l(16.0, 0.0), l(16.0, 4.0), p(20.0, 4.0)], &cfg);
         let want = [
@@ -819,6 +836,59 @@ mod tests {
         let want = libm::ceilf(st.lit_length / 16.0) as u64;
         assert_eq!(st.lit_samples, u64::from(cfg.dwell_start) + want + u64::from(cfg.dwell_end));
         assert_eq!(want, 20);
+    }
+
+    #[test]
+    fn constant_spacing_runs_on_across_corners() {
+        let lit = |cmds: &[Command<ScreenPoint>], cfg: &BeamConfig| -> Vec<Sample> {
+            run(cmds, cfg).into_iter().filter(|s| s.beam == Beam::On).collect()
+        };
+        let per_run = BeamConfig { lit_step: 16.0, ..BeamConfig::default() };
+        let constant = BeamConfig { spacing: Spacing::Constant, corner_dwell: 0, ..per_run };
+        // 10 LSB along x, a right-angle corner, 40 up: 50 LSB of path.
+        let corner = [m(0.0, 0.0), l(10.0, 0.0), l(10.0, 40.0)];
+        // Runs: a sample at the corner, its dwell, and steps again from
+        // there.
+        assert_eq!(
+            lit(&corner, &per_run),
+            [on(0, 0), on(0, 0), on(10, 0), on(10, 0), on(10, 16), on(10, 32), on(10, 40), on(10, 40)]
+        );
+        // Constant: every 16 LSB of path from the start, across the corner
+        // (which takes no sample): 16, 32, 48, and the end.
+        assert_eq!(
+            lit(&corner, &constant),
+            [on(0, 0), on(0, 0), on(10, 6), on(10, 22), on(10, 38), on(10, 40), on(10, 40)]
+        );
+        // With a corner dwell the corner is sampled and dwells, and the
+        // steps go on from where they were.
+        let dwell = BeamConfig { corner_dwell: 1, ..constant };
+        assert_eq!(
+            lit(&corner, &dwell),
+            [
+                on(0, 0),
+                on(0, 0),
+                on(10, 0),
+                on(10, 0),
+                on(10, 6),
+                on(10, 22),
+                on(10, 38),
+                on(10, 40),
+                on(10, 40)
+            ]
+        );
+        // A zigzag of 100 corners: ceil(length / step) samples besides the
+        // dwells (89), where runs take two a corner (its sample and dwell).
+        let mut zig = std::vec![m(0.0, 0.0)];
+        for k in 1..=100 {
+            zig.push(l(10.0 * k as f32, if k % 2 == 0 { 0.0 } else { 10.0 }));
+        }
+        let st = frame_stats(zig.iter().copied(), &constant);
+        let steps = libm::ceilf(st.lit_length / 16.0) as u64;
+        assert_eq!(st.lit_samples, 2 + steps + 1);
+        assert!(frame_stats(zig.iter().copied(), &per_run).lit_samples > st.lit_samples + 100);
+        // Straight or gently bent paths, dots and jumps: as runs.
+        let straight = [m(0.0, 100.0), l(10.0, 100.0), l(20.0, 100.0), l(50.0, 100.0), p(7.0, 9.0)];
+        assert_eq!(run(&straight, &constant), run(&straight, &per_run));
     }
 
     #[test]

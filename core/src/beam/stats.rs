@@ -62,6 +62,54 @@ where
     scheduler.stats()
 }
 
+/// Bisections [`fit_spacing`] makes: the step it finds is within
+/// `2^-FIT_ROUNDS` of the range it searches, in ratio (under 0.01%).
+const FIT_ROUNDS: u32 = 24;
+
+/// `cfg` with the smallest `lit_step` of at least `cfg`'s (sanitized) at
+/// which the frame of `commands` takes at most `max_samples` samples: the
+/// spacing that makes a picture refresh at `rate / max_samples` Hz or
+/// faster, for [`Spacing::Constant`](super::Spacing::Constant) at a sound
+/// card's rate (any [`Spacing`](super::Spacing) works: the samples of a
+/// frame never grow with its step).
+///
+/// A frame that fits at `cfg.lit_step` keeps it. One that does not fit
+/// even at the largest step searched, twice the DAC's span (where every
+/// polyline takes its dwells and about one step: what is left is jumps,
+/// dwells and dots), gets that step; check the result's [`frame_stats`].
+/// Otherwise the step is found by bisection to within 0.01%, in
+/// `FIT_ROUNDS + 2` (26) passes of [`frame_stats`] over `commands`.
+/// Never panics; heap-free.
+pub fn fit_spacing<I>(commands: I, cfg: &BeamConfig, max_samples: u64) -> BeamConfig
+where
+    I: IntoIterator<Item = Command<ScreenPoint>> + Clone,
+{
+    let cfg = cfg.sanitized();
+    let with = |lit_step: f32| BeamConfig { lit_step, ..cfg };
+    let fits = |lit_step: f32| frame_stats(commands.clone(), &with(lit_step)).samples <= max_samples;
+    let mut lo = cfg.lit_step;
+    if fits(lo) {
+        return cfg;
+    }
+    let mut hi = (2.0 * (f32::from(cfg.max_code()) + 1.0)).max(lo);
+    if !fits(hi) {
+        return with(hi);
+    }
+    // `lo` does not fit, `hi` does: halve the ratio between them.
+    for _ in 0..FIT_ROUNDS {
+        let mid = crate::fastmath::sqrt(lo * hi);
+        if !(mid > lo && mid < hi) {
+            break;
+        }
+        if fits(mid) {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    with(hi)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -89,5 +137,34 @@ mod tests {
         assert_eq!(st.lit_length, 160.0);
         assert!((st.blank_length - (100.0 + libm::sqrtf(160.0 * 160.0 + 100.0 * 100.0))).abs() < 1e-3);
         assert_eq!(st, frame_stats(cmds, &BeamConfig::default()));
+    }
+
+    #[test]
+    fn fit_spacing_finds_the_smallest_step_that_fits() {
+        use crate::beam::Spacing;
+        // A 4000-LSB zigzag of 100 segments.
+        let mut cmds = std::vec![m(0.0, 0.0)];
+        for k in 1..=100 {
+            cmds.push(l(40.0 * k as f32, if k % 2 == 0 { 0.0 } else { 30.0 }));
+        }
+        let cfg = BeamConfig { spacing: Spacing::Constant, corner_dwell: 0, ..BeamConfig::default() };
+        let at = |c: &BeamConfig| frame_stats(cmds.iter().copied(), c).samples;
+        let fast = at(&cfg);
+        // Fits already: unchanged.
+        assert_eq!(fit_spacing(cmds.iter().copied(), &cfg, fast), cfg);
+        for budget in [fast / 2, fast / 5, 60] {
+            let fit = fit_spacing(cmds.iter().copied(), &cfg, budget);
+            assert!(at(&fit) <= budget, "{budget}: {} samples", at(&fit));
+            // The smallest: a hair less does not fit.
+            let less = BeamConfig { lit_step: fit.lit_step * 0.999, ..fit };
+            assert!(at(&less) > budget, "{budget}: step {} is not the smallest", fit.lit_step);
+            assert_eq!(BeamConfig { lit_step: cfg.lit_step, ..fit }, cfg);
+        }
+        // Out of reach (the jumps and dwells alone take more): the largest
+        // step searched.
+        let fit = fit_spacing(cmds.iter().copied(), &cfg, 3);
+        assert_eq!(fit.lit_step, 8192.0);
+        // Nothing to draw: any step fits.
+        assert_eq!(fit_spacing(core::iter::empty(), &cfg, 0), cfg);
     }
 }
