@@ -491,8 +491,10 @@ impl<'a> Engine<'a> {
     /// recording is in the tail and what spilled in the head, and the
     /// commit fits the head (the tail left), or else the memory less the
     /// recording's own bytes (the recording lies at the very end:
-    /// [`Kept`]). The stitch pass makes the same picture in any room from
-    /// its reserve on, and the order pass's scratch is the head either
+    /// [`Kept`]), where the stitch pass may have less than its reserve,
+    /// down to [`stitch_least`](crate::path::stitch_least). The stitch
+    /// pass makes the same picture in any room from that least on (more
+    /// slowly in less), and the order pass's scratch is the head either
     /// way.
     fn commit_replay(&self) -> Option<usize> {
         let dev = &self.dev;
@@ -503,21 +505,22 @@ impl<'a> Engine<'a> {
             return Some(dev.tail);
         }
         let room = self.slices.len().saturating_sub(self.kept.len());
-        (self.commit_needs() <= room).then_some(self.kept.len())
+        (self.commit_needs(crate::path::stitch_least) <= room).then_some(self.kept.len())
     }
 
     /// Bytes the commit due needs besides the order pass: what spilled,
-    /// and the stitch pass's scratch.
-    fn commit_needs(&self) -> usize {
+    /// and the stitch pass's scratch as `stitch` (of the fragments and
+    /// points) sizes it.
+    fn commit_needs(&self, stitch: fn(usize, usize) -> usize) -> usize {
         let spilled = self.dev.stream.spilled().len();
         let points = self.back.len() + spilled;
-        Geometry::bytes_for(spilled) + crate::path::stitch_reserve(self.dev.pieces as usize, points)
+        Geometry::bytes_for(spilled) + stitch(self.dev.pieces as usize, points)
     }
 
     /// Whether the commit due could do with the head of the slice memory
-    /// alone: what spilled and the stitch pass's scratch fit there.
+    /// alone: what spilled and the stitch pass's reserve fit there.
     fn commit_fits_head(&self) -> bool {
-        self.commit_needs() <= self.slices.len().saturating_sub(self.dev.tail)
+        self.commit_needs(crate::path::stitch_reserve) <= self.slices.len().saturating_sub(self.dev.tail)
     }
 
     /// Whether the commit due waits one frame, for the picture on screen

@@ -49,8 +49,23 @@ pub(super) enum Width {
 /// few ends. With less it still stitches (fewer lists, longer walks) down
 /// to three words a fragment, and below that copies the pieces unordered.
 pub(crate) const fn stitch_reserve(frags: usize, points: usize) -> usize {
-    let word = if points < NARROW_LIMIT && 2 * frags < NARROW_LIMIT { 2 } else { 4 };
-    word * (3 * frags + frags / 2 + 1)
+    stitch_word(frags, points) * (3 * frags + frags / 2 + 1)
+}
+
+/// The least scratch worth giving the stitch pass of `frags` fragments of
+/// `points` points when [`stitch_reserve`] is not to be had: its starts
+/// and two end links a fragment, and a list for every sixteen ends, so
+/// that a lookup walks some four times the ends it walks in the reserve.
+/// In any room from three words a fragment up (one list for all the ends)
+/// it makes the same polylines as in the reserve or more: its lists hold
+/// the ends of a point in the same order however many lists there are.
+pub(crate) const fn stitch_least(frags: usize, points: usize) -> usize {
+    stitch_word(frags, points) * (3 * frags + frags / 8 + 1)
+}
+
+/// The stitch pass's word: `u16` where its points and ends fit.
+const fn stitch_word(frags: usize, points: usize) -> usize {
+    if points < NARROW_LIMIT && 2 * frags < NARROW_LIMIT { 2 } else { 4 }
 }
 
 /// Bytes of scratch the order pass wants for `frags` polylines of

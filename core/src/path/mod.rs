@@ -62,8 +62,8 @@ mod tests;
 pub mod thin;
 
 use core::cell::Cell;
-pub(crate) use index::stitch_reserve;
 use index::{Index, Width};
+pub(crate) use index::{stitch_least, stitch_reserve};
 use merge::{Out, Walk};
 pub(crate) use order::Metric;
 pub use store::{Commands, Geometry, Kind, Packed};

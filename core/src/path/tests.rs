@@ -294,8 +294,21 @@ proptest::proptest! {
         // (The engine keeps a recording in the slice memory's tail through
         // a commit when the head holds `stitch_reserve`: the stitch must
         // not depend on how much more it would have had.)
+        // (When the memory less the recording is short of that, the
+        // commit stitches in what is left, down to `stitch_least`.)
         let reserve = stitch_reserve(frags, src.len());
-        for (hashed, bytes) in [(true, 16 * 1024), (false, 16 * 1024), (true, tight), (true, reserve), (true, reserve + 7)] {
+        let least = stitch_least(frags, src.len());
+        for (hashed, bytes) in [
+            (true, 16 * 1024),
+            (false, 16 * 1024),
+            (true, tight),
+            (true, reserve),
+            (true, reserve + 7),
+            (true, least),
+            (true, least + 3),
+            // One list for all the ends: three words a fragment and one.
+            (true, 2 * (3 * frags + 1)),
+        ] {
             let mut p2 = store(512);
             let mut dst = Geometry::new(&mut p2);
             let mut scratch = vec![0u8; bytes];
