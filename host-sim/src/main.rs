@@ -1156,21 +1156,37 @@ fn send(args: &SendArgs) -> Result<()> {
         args.port.clone()
     };
     let (reader, writer) = open_port(&port, args.baud)?;
-    let link = connect(reader, writer)?;
+    let mut link = connect(reader, writer)?;
     let wire = match fitted {
         Some(w) => w,
         None => {
             let vol = vol.context("the volume was fitted already")?;
             let every = usize::from(args.every);
-            let fitted = isoscope_sim::fit::fit_to_connected(
-                vol,
-                &args.input.fit.options(),
-                link.board(),
-                board_picture,
-                |_| every,
-            )?;
-            let fitted = noted(fitted);
-            WireVolume::from_loaded(&fitted)?
+            let (opts, board) = (args.input.fit.options(), *link.board());
+            // The fit runs the board's own engine and can take seconds, in
+            // which a board may drop a silent client (the virtual board's
+            // --idle-timeout): the board is greeted meanwhile.
+            let fitted = std::thread::scope(|s| -> Result<_> {
+                let fit = s.spawn(|| {
+                    isoscope_sim::fit::fit_to_connected(vol, &opts, &board, board_picture, |_| every)
+                });
+                let mut greeted = std::time::Instant::now();
+                while !fit.is_finished() {
+                    std::thread::sleep(std::time::Duration::from_millis(10));
+                    if greeted.elapsed() >= KEEP_ALIVE {
+                        link.greet()?;
+                        greeted = std::time::Instant::now();
+                    }
+                }
+                fit.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+            })?;
+            let takes = |b: &isoscope_sim::link::BoardInfo| {
+                (b.firmware, b.max_slice_samples, b.sample_types, b.display_points)
+            };
+            if takes(link.board()) != takes(&board) {
+                bail!("the board on {port} changed while the volume was fitted to it: send again");
+            }
+            WireVolume::from_loaded(&noted(fitted))?
         }
     };
     let chunks_per_slice = wire.slice_bytes().div_ceil(cfg.chunk.max(1));
@@ -1190,6 +1206,11 @@ fn send(args: &SendArgs) -> Result<()> {
     print_out(&report.report(args.baud))?;
     Ok(())
 }
+
+/// How often `send` greets the board while it fits a volume to it: well
+/// inside the virtual board's shortest `--idle-timeout` (and its default
+/// 10 s).
+const KEEP_ALIVE: std::time::Duration = std::time::Duration::from_millis(500);
 
 fn device(args: &DeviceArgs) -> Result<()> {
     use isoscope_sim::board::{HostBuffers, host_capacity};

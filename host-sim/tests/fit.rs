@@ -143,8 +143,12 @@ fn samples_narrow_only_when_every_value_fits() {
 /// `send` of `input` (send's arguments) to a virtual f407 board: its
 /// standard error and output, once the board has shown the volume.
 fn send_to_a_virtual_board(input: &[&std::ffi::OsStr]) -> (String, String) {
+    // A board that drops a client silent for two seconds, less than the
+    // fits of the MNI-sized volumes take on a slow machine: `send` greets
+    // it while it fits (it once fell silent, and lost the board).
     let mut board = Command::new(bin())
         .args(["device", "--tcp", "127.0.0.1:0", "--board", "f407", "--baud", "0", "--exit-after", "1"])
+        .args(["--idle-timeout", "2"])
         .stdout(Stdio::piped())
         .spawn()
         .unwrap();

@@ -57,19 +57,36 @@ where
     W: Write,
 {
     let mut line = Line::start(reader, writer);
-    // Every command frame, in order, with consecutive sequence numbers from
-    // seq0, which the Hello announces.
+    let (sender, board) = greet(&mut line)?;
+    Ok(Connection { line, sender, board })
+}
+
+/// A new sender's hello, answered: every command frame after it, in
+/// order, has consecutive sequence numbers from the `seq0` it announces.
+fn greet<W: Write>(line: &mut Line<W>) -> Result<(Sender, BoardInfo)> {
     let seq0 = (Instant::now().elapsed().subsec_nanos() as u16) ^ 0x5A5A;
     let mut sender = Sender::new(seq0, line.now());
     line.run(&mut sender, None)?;
     let board = *sender.board().context("the board said no capabilities")?;
-    Ok(Connection { line, sender, board })
+    Ok((sender, board))
 }
 
 impl<W: Write> Connection<W> {
     /// What the board said it takes.
     pub fn board(&self) -> &BoardInfo {
         &self.board
+    }
+
+    /// Say hello again, answered, while the host works on something before
+    /// it sends (fitting the volume to the board): a board may drop a
+    /// client silent for long (`isoscope-sim device --tcp`'s
+    /// `--idle-timeout`). What the board takes is read again.
+    ///
+    /// # Errors
+    /// No answer, or another protocol version.
+    pub fn greet(&mut self) -> Result<()> {
+        (self.sender, self.board) = greet(&mut self.line)?;
+        Ok(())
     }
 
     /// Stream `vol` to the board.
