@@ -7,11 +7,11 @@
 use crate::progress::Progress;
 use anyhow::{Context, Result, anyhow};
 use isoscope_core::command::{Command, Point3};
-use isoscope_core::contour::ContourStats;
 use isoscope_core::contour::Voxel;
 use isoscope_core::contour::grid::{Plane, Planes, Volume};
 use isoscope_core::contour::surface::{SliceId, SurfaceSink, contour_slab, contour_slice};
 use isoscope_core::contour::trace::Traversal;
+use isoscope_core::contour::{ContourError, ContourStats};
 use std::convert::Infallible;
 use std::io::Write;
 use std::sync::Mutex;
@@ -49,14 +49,14 @@ pub struct Job<'a> {
     pub every: usize,
 }
 
-/// A sink that hands every command to a closure.
-struct FnSink<'f>(&'f mut dyn FnMut(SliceId, usize, Command<Point3>));
+/// Keeps every command with its slice and level.
+struct Keep(Vec<(SliceId, u32, Command<Point3>)>);
 
-impl SurfaceSink for FnSink<'_> {
+impl SurfaceSink for Keep {
     type Error = Infallible;
     #[inline]
     fn command(&mut self, slice: SliceId, level: usize, c: Command<Point3>) -> Result<(), Infallible> {
-        (self.0)(slice, level, c);
+        self.0.push((slice, level as u32, c));
         Ok(())
     }
 }
@@ -109,6 +109,22 @@ fn bands<T: Voxel>(volume: &Volume<'_, T>, planes: &[Plane], threads: usize, eve
     out
 }
 
+/// Contour one band into `sink`: each sink gets its own monomorphic copy,
+/// so no command goes through a call by pointer.
+fn run_band<T: Voxel, S: SurfaceSink<Error = Infallible>>(
+    volume: &Volume<'_, T>,
+    band: &Band,
+    planes: Planes,
+    levels: &[f32],
+    traversal: Traversal,
+    sink: &mut S,
+) -> Result<ContourStats, ContourError<Infallible>> {
+    match band {
+        Band::Slice(slice) => contour_slice(volume, *slice, levels, traversal, sink),
+        Band::Slab(zs) => contour_slab(volume, planes, zs.clone(), levels, traversal, sink),
+    }
+}
+
 /// Contour every slice of the job's planes on `job.threads` threads. The
 /// result is the same for any thread count: each slice's commands in
 /// row-major cell order, slices in plane and index order.
@@ -131,26 +147,18 @@ pub fn contour_volume<T: Voxel + Sync>(
         loop {
             let i = next.fetch_add(1, Ordering::Relaxed);
             let Some(band) = bands.get(i) else { return Ok(()) };
-            let mut cmds = Vec::new();
             let (levels, traversal) = (job.levels, job.traversal);
-            let run = |sink: &mut dyn FnMut(SliceId, usize, Command<Point3>)| {
-                let mut s = FnSink(sink);
-                match band {
-                    Band::Slice(slice) => contour_slice(volume, *slice, levels, traversal, &mut s),
-                    Band::Slab(zs) => contour_slab(volume, planes, zs.clone(), levels, traversal, &mut s),
-                }
-            };
-            let stats = if job.keep {
-                run(&mut |slice, level, c| cmds.push((slice, level as u32, c)))
+            let (cmds, stats) = if job.keep {
+                let mut keep = Keep(Vec::new());
+                let stats = run_band(volume, band, planes, levels, traversal, &mut keep);
+                (keep.0, stats)
             } else {
                 let mut sum = Checksum(0);
-                let stats = run(&mut |slice, level, c| {
-                    let _ = sum.command(slice, level, c);
-                });
+                let stats = run_band(volume, band, planes, levels, traversal, &mut sum);
                 std::hint::black_box(sum.0);
-                stats
-            }
-            .map_err(|e| anyhow!("{band:?}: {e}"))?;
+                (Vec::new(), stats)
+            };
+            let stats = stats.map_err(|e| anyhow!("{band:?}: {e}"))?;
             *results[i].lock().map_err(|_| anyhow!("a worker thread panicked"))? = Some((cmds, stats));
             if let Some(p) = progress {
                 p.inc();

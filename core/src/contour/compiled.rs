@@ -48,6 +48,14 @@ impl Program {
         self.len() == 0
     }
 
+    /// The instructions packed four bits each, the first lowest: the
+    /// edge's index in bits 0 to 2, bit 3 for DRAWTO (what
+    /// [`Program::steps`] decodes).
+    #[inline(always)]
+    pub(crate) const fn packed(self) -> u32 {
+        self.0 as u32
+    }
+
     /// The instructions in order: the drawing instruction and the edge
     /// whose crossing it goes to.
     #[inline(always)]

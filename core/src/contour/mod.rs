@@ -155,16 +155,15 @@ pub fn contour_subgrid<P, S: CommandSink<P>>(
             && traversal == Traversal::Compiled
             && let Some(program) = compiled::program(code, below)
         {
-            // The compiled traversal: every crossing inside an edge.
-            for (conn, e) in program.steps() {
-                let p = at.locate_edge(sub, level, e);
-                placed.step(
-                    match conn {
-                        Conn::SetPoint => Command::MoveTo(p),
-                        Conn::DrawTo => Command::LineTo(p),
-                    },
-                    &mut send,
-                )?;
+            // The compiled traversal: every crossing inside an edge, no
+            // node at the level.
+            let mut steps = program.packed();
+            for _ in 0..program.len() {
+                let e = steps as usize & 7;
+                let p = at.along(e, sub.crossing_inside(e, level));
+                placed
+                    .step(if steps & 8 != 0 { Command::LineTo(p) } else { Command::MoveTo(p) }, &mut send)?;
+                steps >>= 4;
             }
             placed.finish(&mut send)?;
             continue;

@@ -52,10 +52,10 @@ fn pair_bit(a: Crossing, b: Crossing) -> u128 {
 /// crossings on it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Placement {
-    x0: f32,
-    x1: f32,
-    y0: f32,
-    y1: f32,
+    /// `x0, x1`: the cell's two grid columns.
+    x: [f32; 2],
+    /// `y0, y1`: its two grid rows.
+    y: [f32; 2],
 }
 
 impl Placement {
@@ -63,20 +63,21 @@ impl Placement {
     /// `(i, j)`.
     #[inline(always)]
     pub fn new(i: usize, j: usize) -> Self {
-        Self { x0: i as f32, x1: (i + 1) as f32, y0: j as f32, y1: (j + 1) as f32 }
+        Self { x: [i as f32, (i + 1) as f32], y: [j as f32, (j + 1) as f32] }
     }
 
     /// The grid coordinates of a crossing at `level`.
     #[inline(always)]
     pub fn locate(&self, sub: &Subgrid, level: f32, at: Crossing) -> (f32, f32) {
-        let xc = self.x0 + 0.5;
-        let yc = self.y0 + 0.5;
+        let ([x0, x1], [y0, y1]) = (self.x, self.y);
+        let xc = x0 + 0.5;
+        let yc = y0 + 0.5;
         match (at.as_node(), at.as_edge()) {
             (Some(n), _) => match n {
-                Node::LL => (self.x0, self.y0),
-                Node::LR => (self.x1, self.y0),
-                Node::UR => (self.x1, self.y1),
-                Node::UL => (self.x0, self.y1),
+                Node::LL => (x0, y0),
+                Node::LR => (x1, y0),
+                Node::UR => (x1, y1),
+                Node::UL => (x0, y1),
                 Node::C => (xc, yc),
             },
             (None, None) => (xc, yc),
@@ -87,19 +88,34 @@ impl Placement {
     /// The grid coordinates of the level's crossing strictly inside `e`.
     #[inline(always)]
     pub fn locate_edge(&self, sub: &Subgrid, level: f32, e: Edge) -> (f32, f32) {
-        let t = sub.crossing(e, level);
-        match e {
-            Edge::B0 => (self.x0 + t, self.y0),
-            Edge::B1 => (self.x1, self.y0 + t),
-            Edge::B2 => (self.x0 + t, self.y1),
-            Edge::B3 => (self.x0, self.y0 + t),
-            Edge::S0 => (self.x0 + 0.5 * t, self.y0 + 0.5 * t),
-            Edge::S1 => (self.x1 - 0.5 * t, self.y0 + 0.5 * t),
-            Edge::S2 => (self.x1 - 0.5 * t, self.y1 - 0.5 * t),
-            Edge::S3 => (self.x0 + 0.5 * t, self.y1 - 0.5 * t),
-        }
+        self.along(e as usize, sub.crossing(e, level))
+    }
+
+    /// The point a fraction `t` (in `[0, 1]`) along the edge with index
+    /// `edge` (`0..8`) in its canonical direction: a corner's coordinate
+    /// plus `t` times 0, 1 or +-0.5 per axis, from a table instead of a
+    /// match (no jump on the edge). Bit-identical to the plain forms
+    /// (`x0 + t`, `x1 - 0.5 * t`, `y0`): `1.0 * t` is `t`, `a + (-0.5) * t`
+    /// is `a - 0.5 * t`, and `a + 0.0 * t` is `a` for `t >= 0` and `a >= 0`.
+    #[inline(always)]
+    pub(crate) fn along(&self, edge: usize, t: f32) -> (f32, f32) {
+        let e = edge & 7;
+        let x = self.x.get((FROM_X1 >> e) & 1).copied().unwrap_or(0.0);
+        let y = self.y.get((FROM_Y1 >> e) & 1).copied().unwrap_or(0.0);
+        let (kx, ky) = (ALONG_X.get(e).copied().unwrap_or(0.0), ALONG_Y.get(e).copied().unwrap_or(0.0));
+        (x + kx * t, y + ky * t)
     }
 }
+
+// Per edge index (B0..B3, S0..S3): whether the edge starts at `x1` rather
+// than `x0` (a bit each), the factor of the crossing's fraction along x,
+// and the same for y. B0: (x0 + t, y0); B1: (x1, y0 + t); B2: (x0 + t,
+// y1); B3: (x0, y0 + t); S0: (x0 + t/2, y0 + t/2); S1: (x1 - t/2, y0 +
+// t/2); S2: (x1 - t/2, y1 - t/2); S3: (x0 + t/2, y1 - t/2).
+const FROM_X1: usize = 0b0110_0010;
+const FROM_Y1: usize = 0b1100_0100;
+const ALONG_X: [f32; 8] = [1.0, 0.0, 1.0, 0.0, 0.5, -0.5, -0.5, 0.5];
+const ALONG_Y: [f32; 8] = [0.0, 1.0, 0.0, 1.0, 0.5, 0.5, -0.5, -0.5];
 
 /// Pen state for one subgrid at one level.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

@@ -327,13 +327,25 @@ impl Subgrid {
     #[inline(always)]
     pub fn crossing(&self, edge: Edge, level: f32) -> f32 {
         let (a, b) = edge.canonical();
-        let (va, vb) = (self.value(a), self.value(b));
-        if va == level {
+        if self.value(a) == level {
             return 0.0;
         }
-        if vb == level {
+        if self.value(b) == level {
             return 1.0;
         }
+        self.crossing_inside(edge as usize, level)
+    }
+
+    /// [`Subgrid::crossing`] of the edge with index `edge` (`0..8`) when
+    /// neither of its nodes is at the level: the compiled traversal's case,
+    /// where the nodes come from a table instead of a match.
+    #[inline(always)]
+    pub(crate) fn crossing_inside(&self, edge: usize, level: f32) -> f32 {
+        let [a, b] = match crate::contour::tree::get(&ENDS, edge & 7) {
+            Some(&ends) => ends,
+            None => [0, 0],
+        };
+        let (va, vb) = (self.at(usize::from(a)), self.at(usize::from(b)));
         let mut num = level - va;
         let mut den = vb - va;
         if !(num.is_finite() && den.is_finite()) {
@@ -342,10 +354,24 @@ impl Subgrid {
             den = vb * 0.5 - va * 0.5;
         }
         let t = num / den;
-        if t >= 0.0 {
-            if t <= 1.0 { t } else { 1.0 }
-        } else {
-            0.0 // also NaN (a zero-length range never contains a crossing)
-        }
+        // 0.0 also for NaN (a zero-length range never contains a crossing).
+        let t = if t >= 0.0 { t } else { 0.0 };
+        if t <= 1.0 { t } else { 1.0 }
     }
 }
+
+/// Each edge's nodes in [`Edge::canonical`] order, as node indices (built
+/// at compile time: an index out of range there is a build error).
+#[allow(clippy::indexing_slicing)]
+const ENDS: [[u8; 2]; 8] = {
+    let mut t = [[0u8; 2]; 8];
+    let mut e = 0;
+    while e < 8 {
+        t[e] = match Edge::from_index(e) {
+            Some(edge) => [edge.canonical().0 as u8, edge.canonical().1 as u8],
+            None => [0, 0],
+        };
+        e += 1;
+    }
+    t
+};

@@ -141,6 +141,27 @@ pub(crate) fn and_across(m: &mut Classes, [a, b, c, d]: [&Classes; 4], n: usize)
     }
 }
 
+/// The class bits that all of the first `n` samples of `c` share (0: some
+/// level may meet a cell among them): whole words, the bytes past `n`
+/// counted as sharing every bit.
+#[inline(always)]
+pub(crate) fn quiet_bits(c: &Classes, n: usize) -> u8 {
+    let (words, _) = c.as_chunks::<8>();
+    let full = n / 8;
+    let mut all = !0u64;
+    for bytes in words.iter().take(full) {
+        all &= u64::from_le_bytes(*bytes);
+    }
+    if !n.is_multiple_of(8)
+        && let Some(bytes) = words.get(full)
+    {
+        all &= u64::from_le_bytes(*bytes) | (!0u64 << (8 * (n % 8)));
+    }
+    let all = all & (all >> 32);
+    let all = all & (all >> 16);
+    (all & (all >> 8)) as u8 & (ABOVE | BELOW)
+}
+
 /// Hand `f` the index of every zero byte of `m[..n]`, in order: the cells
 /// some level may meet (`m` holds the AND of their corners' classes). Eight
 /// bytes at a time: a word with no zero byte, the common case, costs one
@@ -320,6 +341,19 @@ mod tests {
             prop_assume!(lo < hi);
             let b = Between::new(lo, hi);
             prop_assert_eq!(b.contains(k), lo < k && k < hi);
+        }
+    }
+
+    proptest! {
+        #[test]
+        fn quiet_bits_are_the_and_of_the_first_n_classes(
+            bytes in prop::collection::vec(prop::sample::select(vec![0u8, ABOVE, BELOW, ABOVE | BELOW]), BLOCK + 9),
+            n in 0..=BLOCK + 1,
+        ) {
+            let mut c: Classes = [0; BLOCK + 9];
+            c.copy_from_slice(&bytes);
+            let want = bytes[..n].iter().fold(ABOVE | BELOW, |a, &b| a & b);
+            prop_assert_eq!(quiet_bits(&c, n), want);
         }
     }
 
