@@ -272,8 +272,8 @@ impl<'a> Engine<'a> {
     /// `refill` is not called, and the beam waits for the commit
     /// ([`Engine::commit_parks`]).
     // Never inlined: called once a frame, it costs nothing, and a board's
-    // profile can then time the commit as one function
-    // (`scripts/firmware-bench`).
+    // profile can then time what runs between frames as one function
+    // (`scripts/firmware-dark`).
     #[inline(never)]
     pub fn update_playing(&mut self, now_ms: u32, refill: &mut dyn FnMut(&mut Player<'_>)) -> bool {
         self.dev.check_timeout(now_ms);
@@ -433,6 +433,9 @@ impl<'a> Engine<'a> {
     /// [`Engine::replay_frames`]; a frame too long for the tail is lost),
     /// plays on from there through `refill` while the fold runs in the
     /// head, and until the volume's picture replaces it.
+    // Never inlined, as `commit`: a board's profile times each fold
+    // apart from the commit (`scripts/firmware-bench`).
+    #[inline(never)]
     fn fold(&mut self, refill: &mut dyn FnMut(&mut Player<'_>)) {
         let key = self.generation;
         let dev = &mut self.dev;
@@ -548,6 +551,10 @@ impl<'a> Engine<'a> {
     /// The received surface becomes the picture, the picture on screen
     /// played on through `refill` meanwhile if it can be
     /// ([`Engine::update_playing`]).
+    // Never inlined: called once a picture, it costs nothing, and a
+    // board's profile can then time the commit alone, not a fold of the
+    // same transfer (`scripts/firmware-bench`).
+    #[inline(never)]
     fn commit(&mut self, refill: &mut dyn FnMut(&mut Player<'_>)) {
         let replay = self.commit_replay();
         if replay.is_none() {
