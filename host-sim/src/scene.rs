@@ -461,6 +461,7 @@ impl Scene {
             s.push('\n');
         };
         kv("board", self.board.map_or("host".into(), |b| b.name.to_string()));
+        kv("dims", format!("{}x{}x{}", self.dims[0], self.dims[1], self.dims[2]));
         kv("capacity_points", self.capacity.points.to_string());
         kv("fragments", c.fragments.to_string());
         kv("every", self.loaded.every.to_string());
