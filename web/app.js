@@ -150,6 +150,7 @@ function settings() {
     planes: planesValue(),
     every: Number.parseInt($('every').value, 10) || 0,
     board: $('board').checked ? 'f407' : '',
+    persistence: $('persistence').checked,
   };
 }
 
@@ -359,7 +360,7 @@ function wireControls() {
     if (e.target.value) loadDemo(e.target.value);
   });
   $('level').addEventListener('input', (e) => setLevels([Number.parseFloat(e.target.value)]));
-  for (const id of ['plane-xy', 'plane-xz', 'plane-yz', 'every', 'board']) {
+  for (const id of ['plane-xy', 'plane-xz', 'plane-yz', 'every', 'board', 'persistence']) {
     $(id).addEventListener('change', changed);
   }
   $('spin').addEventListener('change', (e) => {

@@ -115,6 +115,7 @@ function apply(s) {
   scope.set_planes(s.planes);
   scope.set_every(s.every);
   scope.set_board(s.board);
+  scope.set_persistence(s.persistence);
 }
 
 // The bytes the link has to write now, the milliseconds until it is to be

@@ -102,6 +102,9 @@ pub struct Scope {
     build_ms: f64,
     draw_ms: f64,
     screen: Phosphor,
+    /// The last frame's glow fades under the next instead of being
+    /// cleared ([`Scope::set_persistence`]).
+    persistence: bool,
     /// The spacing of the last [`Scope::audio`] frame.
     audio_step: f32,
 }
@@ -238,6 +241,18 @@ impl Scope {
             self.scene = None;
         }
         Ok(())
+    }
+
+    /// Persistence on: each new frame (a turn, a level) is drawn over the
+    /// last one faded by the phosphor's persistence, as the frames of
+    /// `render --animate` are, so a turning surface leaves a fading trail
+    /// as on a long-persistence scope. Off (the default): each frame on a
+    /// dark screen, as `render` draws one. Turning it off redraws.
+    pub fn set_persistence(&mut self, on: bool) {
+        if self.persistence && !on {
+            self.scene = None;
+        }
+        self.persistence = on;
     }
 
     /// Build the frame and draw it if the settings changed; whether they
@@ -401,6 +416,7 @@ impl Scope {
             build_ms: 0.0,
             draw_ms: 0.0,
             screen,
+            persistence: false,
             audio_step: 0.0,
         })
     }
@@ -645,8 +661,11 @@ impl Scope {
         let built = self.build(wire, &cfg)?;
         let t1 = web_time::Instant::now();
         report("drawing the picture", 0, 0);
-        // A frame on a dark screen, as `render` draws it (one refresh).
-        self.screen.clear();
+        // A frame on a dark screen, as `render` draws it (one refresh), or
+        // over the last one, faded, as `render --animate` draws its frames.
+        if !self.persistence {
+            self.screen.clear();
+        }
         scene::refresh(&mut self.screen, &built, 1, None);
         self.build_ms = (t1 - t0).as_secs_f64() * 1e3;
         self.draw_ms = t1.elapsed().as_secs_f64() * 1e3;
@@ -869,6 +888,30 @@ mod tests {
         assert_eq!(s.scene.as_ref().unwrap().samples, want.samples);
         assert_eq!(s.pixels().len(), 64 * 64 * 4);
         assert!(s.stats().contains("\"points\":"));
+    }
+
+    #[test]
+    fn with_persistence_a_turn_is_drawn_over_the_last_frame_faded() {
+        let mut s = Scope::with_size(64).unwrap();
+        s.demo("torus:12").unwrap();
+        s.set_persistence(true);
+        s.redraw().unwrap();
+        let a = s.scene.clone().unwrap();
+        s.set_view(60.0, 10.0, DEFAULT_ZOOM);
+        assert!(s.update().unwrap(), "a turn draws a new frame");
+        let b = s.scene.clone().unwrap();
+        assert_ne!(a.samples, b.samples);
+        // `render --animate`'s frames: the last one decays, the new one
+        // is deposited over it.
+        let mut want = Phosphor::new(PhosphorConfig::with_size(64, 64)).unwrap();
+        scene::refresh(&mut want, &a, 1, None);
+        scene::refresh(&mut want, &b, 1, None);
+        assert!(s.pixels() == want.to_rgba8(), "the turn over the last frame, faded");
+        // Off: redrawn at once, on a dark screen, as `render` draws it.
+        s.set_persistence(false);
+        assert!(s.update().unwrap());
+        let alone = scene::render(&b, PhosphorConfig::with_size(64, 64), 1, None).unwrap();
+        assert!(s.pixels() == alone.to_rgba8() && alone.to_rgba8() != want.to_rgba8());
     }
 
     #[test]
