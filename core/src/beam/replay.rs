@@ -152,6 +152,93 @@ impl Kept {
     pub fn clear(&mut self) {
         self.held = Held::Nothing;
     }
+
+    /// Thin the recording held in `mem` (the memory it was recorded in, or
+    /// any that ends where that ends) in place: of each run of lit steps
+    /// every `every`-th sample and the run's last are kept (a kept step
+    /// that would not fit a delta keeps the sample before it too), and a
+    /// repeat run keeps `1 / every` of its samples, at least one. The
+    /// samples left are a subsequence of the frame's, every run's end
+    /// among them: the same picture, drawn faster and so dimmer, in about
+    /// `1 / every` of the bytes and samples, for a commit that needs the
+    /// rest of the memory while the picture plays on. A recording at the
+    /// very end of the memory stays there. Returns the bytes it takes
+    /// now; a recording that does not read whole is forgotten (0).
+    pub fn thin(&mut self, mem: &mut [u8], every: u8) -> usize {
+        let Held::Frame { key, from_end, len, mut stats } = self.held else { return 0 };
+        let every = u32::from(every.max(1));
+        let at_end = from_end == len;
+        let Some(rec) = mem.len().checked_sub(from_end).and_then(|start| mem.get_mut(start..start + len))
+        else {
+            self.held = Held::Nothing;
+            return 0;
+        };
+        let Some((w, samples, lit)) = thin_runs(rec, every) else {
+            self.held = Held::Nothing;
+            return 0;
+        };
+        (stats.samples, stats.lit_samples) = (samples, lit);
+        let from_end = if at_end {
+            let end = mem.len();
+            mem.copy_within(end - len..end - len + w, end - w);
+            w
+        } else {
+            from_end
+        };
+        self.held = Held::Frame { key, from_end, len: w, stats };
+        w
+    }
+}
+
+/// [`Kept::thin`] over the bytes of a recording: the thinned runs are
+/// written from its start (never past what has been read); their length,
+/// samples and lit samples, or `None` for runs that do not read whole.
+fn thin_runs(rec: &mut [u8], every: u32) -> Option<(usize, u64, u64)> {
+    let (mut r, mut w) = (0usize, 0usize);
+    let (mut samples, mut lit) = (0u64, 0u64);
+    while r < rec.len() {
+        let head = *rec.get(r)?;
+        if head == 0 {
+            let run: [u8; 8] = *rec.get(r..r + 8)?.first_chunk()?;
+            let n = u32::from(u16::from_le_bytes([run[6], run[7]]));
+            let kept = n.div_ceil(every).max(1);
+            let [nl, nh] = (kept as u16).to_le_bytes(); // kept <= n <= u16::MAX
+            *rec.get_mut(w..w + 8)?.first_chunk_mut()? = [0, run[1], run[2], run[3], run[4], run[5], nl, nh];
+            samples += u64::from(kept);
+            lit += if run[5] == 0 { 0 } else { u64::from(kept) };
+            (r, w) = (r + 8, w + 8);
+            continue;
+        }
+        let h = usize::from(head);
+        rec.get(r + 1..r + 1 + 2 * h)?;
+        // Pairs out so far, and the steps taken since the last one out.
+        let (mut out, mut since) = (0usize, 0u32);
+        let (mut ax, mut ay) = (0i16, 0i16);
+        for i in 0..h {
+            let (dx, dy) =
+                (i16::from(*rec.get(r + 1 + 2 * i)? as i8), i16::from(*rec.get(r + 2 + 2 * i)? as i8));
+            let (nx, ny) = (ax + dx, ay + dy);
+            if since > 0 && (i8::try_from(nx).is_err() || i8::try_from(ny).is_err()) {
+                // Too far for one delta: the sample before goes out too.
+                *rec.get_mut(w + 1 + 2 * out..w + 3 + 2 * out)?.first_chunk_mut()? = [ax as u8, ay as u8];
+                out += 1;
+                (ax, ay, since) = (dx, dy, 1);
+            } else {
+                (ax, ay, since) = (nx, ny, since + 1);
+            }
+            if since == every || i + 1 == h {
+                *rec.get_mut(w + 1 + 2 * out..w + 3 + 2 * out)?.first_chunk_mut()? = [ax as u8, ay as u8];
+                out += 1;
+                (ax, ay, since) = (0, 0, 0);
+            }
+        }
+        // At most one out a step: `out <= h`.
+        *rec.get_mut(w)? = out as u8;
+        samples += out as u64;
+        lit += out as u64;
+        (r, w) = (r + 1 + 2 * h, w + 1 + 2 * out);
+    }
+    Some((w, samples, lit))
 }
 
 impl<'m> Replay<'m> {
@@ -650,7 +737,65 @@ mod tests {
             })
     }
 
+    #[test]
+    fn thinning_a_line_by_two_keeps_every_second_sample_in_half_the_bytes() {
+        // A settle, then 250 lit steps of 10 LSB along x (one delta run).
+        let mut frame = std::vec![Sample::new(100, 200, Beam::Off); 40];
+        frame.extend((1..=250).map(|k| Sample::new(100 + 10 * k, 200, Beam::On)));
+        let mut mem = std::vec![0u8; 4096];
+        let mut kept = Kept::with_tail(4096);
+        let mut replay = Replay::new(&mut mem, &mut kept);
+        let mut rec = replay.record(1).unwrap();
+        rec.fill_with(&mut Samples(frame.iter().copied()), 2000, |_| {});
+        rec.finish(FrameStats::default());
+        let before = kept.len();
+        let after = kept.thin(&mut mem, 2);
+        let thin: Vec<Sample> = play(&mem, &kept, 1).unwrap().collect();
+        let mut want = std::vec![Sample::new(100, 200, Beam::Off); 20];
+        want.extend((1..=125).map(|k| Sample::new(100 + 20 * k, 200, Beam::On)));
+        assert!(thin == want, "{} samples", thin.len());
+        assert_eq!((before, after), (8 + 1 + 2 * 250, 8 + 1 + 2 * 125));
+        assert!(kept.in_tail(), "still at the end of the memory");
+    }
+
+    /// Whether `small` is a subsequence of `big`.
+    fn subsequence(small: &[Sample], big: &[Sample]) -> bool {
+        let mut it = big.iter();
+        small.iter().all(|s| it.any(|b| b == s))
+    }
+
     proptest! {
+        /// A thinned recording plays a subsequence of the frame with its
+        /// last sample, in about `1 / every` of the samples, and stays at
+        /// the end of the memory when it was there.
+        #[test]
+        fn a_thinned_recording_is_a_subsequence_of_the_frame(frame in frame(), every in 1u8..6, tail in any::<bool>()) {
+            let cap = 1 << 16;
+            let mut mem = std::vec![0u8; cap];
+            let mut kept = if tail { Kept::with_tail(cap) } else { Kept::new() };
+            let mut replay = Replay::new(&mut mem, &mut kept);
+            let mut live = Samples(frame.iter().copied());
+            let mut rec = replay.record(1).unwrap();
+            while rec.fill_with(&mut live, 512, |_| {}) == 512 {}
+            rec.finish(FrameStats { samples: frame.len() as u64, ..FrameStats::default() });
+            let before = kept.len();
+            let after = kept.thin(&mut mem, every);
+            prop_assert_eq!(after, kept.len());
+            prop_assert!(after <= before);
+            prop_assert_eq!(kept.in_tail(), tail);
+            let thin: Vec<Sample> = play(&mem, &kept, 1).unwrap().collect();
+            prop_assert!(subsequence(&thin, &frame), "not a subsequence");
+            prop_assert_eq!(thin.last(), frame.last());
+            prop_assert_eq!(play(&mem, &kept, 1).unwrap().stats().samples, thin.len() as u64);
+            if every == 1 {
+                prop_assert_eq!(&thin, &frame);
+            } else {
+                // Each run keeps at most one sample in `every`, plus its
+                // end and the samples before too-far steps.
+                prop_assert!(thin.len() <= frame.len());
+            }
+        }
+
         /// What is played while recording, and every replay, is the frame.
         #[test]
         fn a_replay_is_the_recorded_frame(frame in frame(), chunk in 1usize..600) {

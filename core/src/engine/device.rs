@@ -59,6 +59,9 @@ pub(super) struct Device<'a> {
     /// recorded into the tail ([`Engine::update_playing`](super::Engine::update_playing)):
     /// it waits no more.
     pub(super) commit_waited: bool,
+    /// The picture's recording was thinned for the commit due
+    /// ([`Engine::update_playing`](super::Engine::update_playing)): not again.
+    pub(super) commit_thinned: bool,
     /// The fold due waits a frame for the picture on screen to be recorded
     /// into the tail as it plays (held still for it, if it spins).
     pub(super) fold_waited: bool,

@@ -113,6 +113,10 @@ pub const fn replay_tail(slice_memory: usize) -> usize {
 /// sender answered `Busy` retries within a fraction of that.
 pub const RELEND_MS: u32 = 1000;
 
+/// Thinnings by two, at most, of a recording for a commit
+/// ([`Engine::update_playing`]): down to a sixteenth of its samples.
+const MAX_THINNING: usize = 4;
+
 /// The receiving half of an [`Engine`] ([`Engine::split`]): feeding bytes
 /// while the picture is being drawn.
 #[derive(Debug)]
@@ -154,6 +158,7 @@ impl<'a> Engine<'a> {
                 shown: None,
                 commit: false,
                 commit_waited: false,
+                commit_thinned: false,
                 fold_waited: false,
                 view: cfg.view,
                 spin_deg_per_s: 0.0,
@@ -298,6 +303,18 @@ impl<'a> Engine<'a> {
             self.dev.commit_waited = true;
             self.dev.lend = Lend::Tail;
             self.kept.clear();
+        } else if self.thins_before_commit() {
+            // The commit needs more of the memory than the recording of the
+            // picture on screen leaves: thinned (a few milliseconds at most,
+            // the beam held), it plays on, dimmer, through the commit at
+            // the next update.
+            self.dev.commit_thinned = true;
+            let room = self.slices.len().saturating_sub(self.commit_needs(crate::path::stitch_least));
+            for _ in 0..MAX_THINNING {
+                if self.kept.len() <= room || self.kept.thin(self.slices, 2) == 0 {
+                    break;
+                }
+            }
         } else if self.dev.commit {
             self.commit(refill);
             self.dev.stream.front_taken = false;
@@ -526,6 +543,22 @@ impl<'a> Engine<'a> {
         self.commit_needs(crate::path::stitch_reserve) <= self.slices.len().saturating_sub(self.dev.tail)
     }
 
+    /// Whether the commit due would park the beam only for want of the
+    /// bytes the recording of the picture on screen takes (it is in the
+    /// tail, what spilled in the head, and the commit's least needs less
+    /// than the memory): the recording is thinned first
+    /// ([`Kept::thin`](crate::beam::replay::Kept::thin)), once.
+    fn thins_before_commit(&self) -> bool {
+        let dev = &self.dev;
+        dev.commit
+            && !dev.commit_thinned
+            && dev.lend == Lend::Tail
+            && self.kept.holds_in_tail(self.generation)
+            && dev.stream.spill_in_head()
+            && self.commit_replay().is_none()
+            && self.commit_needs(crate::path::stitch_least) < self.slices.len()
+    }
+
     /// Whether the commit due waits one frame, for the picture on screen
     /// to be recorded into the tail as it plays, so that the commit can
     /// play it on (the volume's slices took all of the slice memory, and
@@ -565,6 +598,7 @@ impl<'a> Engine<'a> {
         let Self { dev, front, back, scratch: extra, slices, kept, chain, unfinished, .. } = self;
         dev.commit = false;
         dev.commit_waited = false;
+        dev.commit_thinned = false;
         let Some(shown) = dev.shown.as_mut() else { return };
         let capacity = slices.len();
         let (slots, lent) = cut(slices, dev.lend, replay.unwrap_or(dev.tail));
