@@ -261,15 +261,16 @@ impl<'l> RowContourer<'l> {
     ) -> Result<(), S::Error> {
         let nx = lower.len().min(upper.len());
         self.kept = if (2..=BLOCK + 1).contains(&nx) { nx } else { 0 };
+        // Classes in their first places (a fixed place costs no select).
+        self.flip = false;
         let mut i0 = 0;
         while i0 + 1 < nx {
             let n = (nx - 1 - i0).min(BLOCK);
             let r0 = lower.get(i0..=i0 + n).unwrap_or(&[]);
             let r1 = upper.get(i0..=i0 + n).unwrap_or(&[]);
             let at = |k| Placement::new(i0 + k, j);
-            let sweep = self.sweep;
-            let [lo, up, m] = self.classes();
-            sweep.run_rows(r0, r1, [lo, up, m], at, |_, x, y| place(x, y), sink, stats)?;
+            let [lo, up, m] = &mut self.classes;
+            self.sweep.run_rows(r0, r1, [lo, up, m], at, |_, x, y| place(x, y), sink, stats)?;
             i0 += n;
         }
         stats.cells += nx.saturating_sub(1) as u64;

@@ -84,13 +84,11 @@ impl Between {
 
     /// All ones when `k` is in, else 0: the borrow of `k - from` less
     /// `span`, as a 64-bit subtraction's high word (a subtraction and a
-    /// subtraction with carry on the M4, where a compare made a flag into
-    /// a value with a conditional move: 38 instructions a column of two
-    /// samples became 32).
-    /// Whether `k` is in: one subtraction and one unsigned compare.
+    /// subtraction with carry on the M4, where a compare makes its flag a
+    /// value with a conditional move).
     #[inline(always)]
-    fn contains(self, k: i32) -> bool {
-        (k.wrapping_sub(self.from) as u32) < self.span
+    fn mask(self, k: i32) -> u32 {
+        (u64::from(k.wrapping_sub(self.from) as u32).wrapping_sub(u64::from(self.span)) >> 32) as u32
     }
 }
 
@@ -117,14 +115,14 @@ impl Sweep<'_> {
         let (above, below) = (self.above, self.below);
         let class = |v: f32| {
             let k = key(v);
-            (u8::from(above.contains(k)) * ABOVE) | (u8::from(below.contains(k)) * BELOW)
+            ((above.mask(k) & u32::from(ABOVE)) | (below.mask(k) & u32::from(BELOW))) as u8
         };
         // Four samples a step: the MCU does not vectorise, and a step
         // costs its loop's count and branch once.
         let (quads, rest) = row.as_chunks::<4>();
         let (outs, _) = out.as_chunks_mut::<4>();
-        for (o, q) in outs.iter_mut().zip(quads) {
-            *o = q.map(class);
+        for (o, &[a, b, c, d]) in outs.iter_mut().zip(quads) {
+            *o = [class(a), class(b), class(c), class(d)];
         }
         let tail = outs.get_mut(quads.len()..).unwrap_or_default().as_flattened_mut();
         for (o, &v) in tail.iter_mut().zip(rest) {
@@ -343,7 +341,7 @@ mod tests {
     type Placed = (usize, f32, f32);
 
     #[test]
-    fn between_is_the_signed_compare() {
+    fn between_masks_the_signed_compare() {
         let edges = [i32::MIN, i32::MIN + 1, -2, -1, 0, 1, 2, 0x7F80_0000, i32::MAX - 1, i32::MAX];
         for &lo in &edges {
             for &hi in &edges {
@@ -353,7 +351,7 @@ mod tests {
                 let b = Between::new(lo, hi);
                 for &k in &edges {
                     let want = lo < k && k < hi;
-                    assert_eq!(b.contains(k), want, "lo, hi, k = {:?}", (lo, hi, k));
+                    assert_eq!(b.mask(k), if want { !0 } else { 0 }, "lo, hi, k = {:?}", (lo, hi, k));
                 }
             }
         }
@@ -361,10 +359,10 @@ mod tests {
 
     proptest! {
         #[test]
-        fn between_is_the_signed_compare_anywhere(lo in any::<i32>(), hi in any::<i32>(), k in any::<i32>()) {
+        fn between_masks_the_signed_compare_anywhere(lo in any::<i32>(), hi in any::<i32>(), k in any::<i32>()) {
             prop_assume!(lo < hi);
             let b = Between::new(lo, hi);
-            prop_assert_eq!(b.contains(k), lo < k && k < hi);
+            prop_assert_eq!(b.mask(k), if lo < k && k < hi { !0 } else { 0 });
         }
     }
 
