@@ -218,10 +218,20 @@ pub fn contour_subgrid<P, S: CommandSink<P>>(
 /// row `j`) and `upper[i], upper[i + 1]` (row `j + 1`), and sits at
 /// `(i, j)`: the commands, and every coordinate, are bit-identical to those
 /// [`contour_grid`] draws for the same cells of a whole grid.
+///
+/// Fed consecutive rows of one grid, [`RowContourer::next_row`] classes
+/// only the new upper row: the lower one's classes are those it kept of the
+/// previous call's upper row.
 #[derive(Debug)]
 pub struct RowContourer<'l> {
     sweep: Sweep<'l>,
+    /// Two rows' classes (the lower and upper, or the other way round:
+    /// `flip`), and scratch.
     classes: [Classes; 3],
+    flip: bool,
+    /// Samples of the previous call's upper row whose classes are kept
+    /// (0 when none are: the row had no cell, or took more than a block).
+    kept: usize,
 }
 
 impl<'l> RowContourer<'l> {
@@ -231,7 +241,7 @@ impl<'l> RowContourer<'l> {
     /// [`ContourError::NonFiniteLevel`].
     pub fn new<E>(levels: &'l [f32], traversal: Traversal) -> Result<Self, ContourError<E>> {
         check_levels(levels)?;
-        Ok(Self { sweep: Sweep::new(levels, traversal), classes: [[0; BLOCK + 9]; 3] })
+        Ok(Self { sweep: Sweep::new(levels, traversal), classes: [[0; BLOCK + 9]; 3], flip: false, kept: 0 })
     }
 
     /// Contour the cells between the sample rows `lower` (grid row `j`) and
@@ -250,16 +260,59 @@ impl<'l> RowContourer<'l> {
         stats: &mut ContourStats,
     ) -> Result<(), S::Error> {
         let nx = lower.len().min(upper.len());
+        self.kept = if (2..=BLOCK + 1).contains(&nx) { nx } else { 0 };
+        // Classes in their first places (a fixed place costs no select).
+        self.flip = false;
         let mut i0 = 0;
         while i0 + 1 < nx {
             let n = (nx - 1 - i0).min(BLOCK);
             let r0 = lower.get(i0..=i0 + n).unwrap_or(&[]);
             let r1 = upper.get(i0..=i0 + n).unwrap_or(&[]);
             let at = |k| Placement::new(i0 + k, j);
-            let [c0, c1, c2] = &mut self.classes;
-            self.sweep.run_rows(r0, r1, [c0, c1, c2], at, |_, x, y| place(x, y), sink, stats)?;
+            let [lo, up, m] = &mut self.classes;
+            self.sweep.run_rows(r0, r1, [lo, up, m], at, |_, x, y| place(x, y), sink, stats)?;
             i0 += n;
         }
+        stats.cells += nx.saturating_sub(1) as u64;
+        Ok(())
+    }
+
+    /// The lower row's classes, the upper row's and scratch.
+    fn classes(&mut self) -> [&mut Classes; 3] {
+        let [a, b, m] = &mut self.classes;
+        if self.flip { [b, a, m] } else { [a, b, m] }
+    }
+
+    /// As [`RowContourer::row`], where `lower` holds the same samples as
+    /// the previous call's `upper` (the next row of the same grid): their
+    /// classes, kept from that call, are not worked out again (a row of up
+    /// to 129 samples, one block; a longer one is classed anew). The caller
+    /// vouches for the samples: the commands of other ones may be wrong,
+    /// though nothing panics.
+    ///
+    /// # Errors
+    /// The sink's error.
+    pub fn next_row<P, S: CommandSink<P>>(
+        &mut self,
+        lower: &[f32],
+        upper: &[f32],
+        j: usize,
+        place: impl Fn(f32, f32) -> P,
+        sink: &mut S,
+        stats: &mut ContourStats,
+    ) -> Result<(), S::Error> {
+        let nx = lower.len().min(upper.len());
+        if self.kept == 0 || self.kept != nx {
+            return self.row(lower, upper, j, place, sink, stats);
+        }
+        let (lower, upper) = (lower.get(..nx).unwrap_or(&[]), upper.get(..nx).unwrap_or(&[]));
+        // The kept upper classes become the lower ones.
+        self.flip = !self.flip;
+        let sweep = self.sweep;
+        let [lo, up, m] = self.classes();
+        sweep.classify(upper, up);
+        let at = |k| Placement::new(k, j);
+        sweep.run_classed(lower, upper, [lo, up], m, at, |_, x, y| place(x, y), sink, stats)?;
         stats.cells += nx.saturating_sub(1) as u64;
         Ok(())
     }

@@ -84,13 +84,11 @@ impl Between {
 
     /// All ones when `k` is in, else 0: the borrow of `k - from` less
     /// `span`, as a 64-bit subtraction's high word (a subtraction and a
-    /// subtraction with carry on the M4, where a compare made a flag into
-    /// a value with a conditional move: 38 instructions a column of two
-    /// samples became 32).
-    /// Whether `k` is in: one subtraction and one unsigned compare.
+    /// subtraction with carry on the M4, where a compare makes its flag a
+    /// value with a conditional move).
     #[inline(always)]
-    fn contains(self, k: i32) -> bool {
-        (k.wrapping_sub(self.from) as u32) < self.span
+    fn mask(self, k: i32) -> u32 {
+        (u64::from(k.wrapping_sub(self.from) as u32).wrapping_sub(u64::from(self.span)) >> 32) as u32
     }
 }
 
@@ -115,20 +113,44 @@ impl Sweep<'_> {
     #[inline(always)]
     pub(crate) fn classify(&self, row: &[f32], out: &mut Classes) {
         let (above, below) = (self.above, self.below);
-        for (o, &v) in out.iter_mut().zip(row) {
+        let class = |v: f32| {
             let k = key(v);
-            *o = (u8::from(above.contains(k)) * ABOVE) | (u8::from(below.contains(k)) * BELOW);
+            ((above.mask(k) & u32::from(ABOVE)) | (below.mask(k) & u32::from(BELOW))) as u8
+        };
+        // Four samples a step: the MCU does not vectorise, and a step
+        // costs its loop's count and branch once.
+        let (quads, rest) = row.as_chunks::<4>();
+        let (outs, _) = out.as_chunks_mut::<4>();
+        for (o, &[a, b, c, d]) in outs.iter_mut().zip(quads) {
+            *o = [class(a), class(b), class(c), class(d)];
+        }
+        let tail = outs.get_mut(quads.len()..).unwrap_or_default().as_flattened_mut();
+        for (o, &v) in tail.iter_mut().zip(rest) {
+            *o = class(v);
         }
     }
 }
 
 /// `m[k]` for the `n` cells between two rows of classes: the AND of the
-/// classes of samples `k` and `k + 1` of both.
+/// classes of samples `k` and `k + 1` of both. Eight cells a word (the
+/// bytes of `m` past `n` are left undefined: [`each_busy`] masks them).
 #[inline(always)]
 pub(crate) fn and_along(m: &mut Classes, a: &Classes, b: &Classes, n: usize) {
-    let (a1, b1) = (a.get(1..=n).unwrap_or(&[]), b.get(1..=n).unwrap_or(&[]));
-    for ((((o, &a0), &a1), &b0), &b1) in m.iter_mut().zip(a).zip(a1).zip(b).zip(b1) {
-        *o = a0 & a1 & b0 & b1;
+    let (aw, _) = a.as_chunks::<8>();
+    let (bw, _) = b.as_chunks::<8>();
+    let (mw, _) = m.as_chunks_mut::<8>();
+    // Both rows' classes of eight samples, ANDed.
+    let both = |w: usize| match (aw.get(w), bw.get(w)) {
+        (Some(a), Some(b)) => u64::from_le_bytes(*a) & u64::from_le_bytes(*b),
+        _ => 0,
+    };
+    let mut next = both(0);
+    for (w, o) in mw.iter_mut().enumerate().take(n.div_ceil(8)) {
+        let cur = next;
+        next = both(w + 1);
+        // Sample `k + 1` of each byte `k`: the next word's first byte
+        // comes in at the top.
+        *o = (cur & ((cur >> 8) | (next << 56))).to_le_bytes();
     }
 }
 
@@ -319,7 +341,7 @@ mod tests {
     type Placed = (usize, f32, f32);
 
     #[test]
-    fn between_is_the_signed_compare() {
+    fn between_masks_the_signed_compare() {
         let edges = [i32::MIN, i32::MIN + 1, -2, -1, 0, 1, 2, 0x7F80_0000, i32::MAX - 1, i32::MAX];
         for &lo in &edges {
             for &hi in &edges {
@@ -329,7 +351,7 @@ mod tests {
                 let b = Between::new(lo, hi);
                 for &k in &edges {
                     let want = lo < k && k < hi;
-                    assert_eq!(b.contains(k), want, "lo, hi, k = {:?}", (lo, hi, k));
+                    assert_eq!(b.mask(k), if want { !0 } else { 0 }, "lo, hi, k = {:?}", (lo, hi, k));
                 }
             }
         }
@@ -337,10 +359,10 @@ mod tests {
 
     proptest! {
         #[test]
-        fn between_is_the_signed_compare_anywhere(lo in any::<i32>(), hi in any::<i32>(), k in any::<i32>()) {
+        fn between_masks_the_signed_compare_anywhere(lo in any::<i32>(), hi in any::<i32>(), k in any::<i32>()) {
             prop_assume!(lo < hi);
             let b = Between::new(lo, hi);
-            prop_assert_eq!(b.contains(k), lo < k && k < hi);
+            prop_assert_eq!(b.mask(k), if lo < k && k < hi { !0 } else { 0 });
         }
     }
 
@@ -354,6 +376,22 @@ mod tests {
             c.copy_from_slice(&bytes);
             let want = bytes[..n].iter().fold(ABOVE | BELOW, |a, &b| a & b);
             prop_assert_eq!(quiet_bits(&c, n), want);
+        }
+    }
+
+    proptest! {
+        #[test]
+        fn and_along_is_the_and_of_each_cells_four_corners(
+            a in prop::collection::vec(any::<u8>(), BLOCK + 9),
+            b in prop::collection::vec(any::<u8>(), BLOCK + 9),
+            n in 0..=BLOCK,
+        ) {
+            let (mut ca, mut cb, mut m): (Classes, Classes, Classes) = ([0; BLOCK + 9], [0; BLOCK + 9], [0; BLOCK + 9]);
+            ca.copy_from_slice(&a);
+            cb.copy_from_slice(&b);
+            and_along(&mut m, &ca, &cb, n);
+            let want: Vec<u8> = (0..n).map(|k| a[k] & a[k + 1] & b[k] & b[k + 1]).collect();
+            prop_assert_eq!(&m[..n], &want[..]);
         }
     }
 

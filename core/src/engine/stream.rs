@@ -622,6 +622,9 @@ impl<'a> Stream<'a> {
             // (Making the contourer clears its 2 KB of scratch: a short row
             // should not pay that alone.)
             let mut done = 0usize;
+            // The x-y row whose lower samples the last row left decoded
+            // and classed, as its upper ones.
+            let mut follow = None;
             let mut sink = Keep {
                 poll,
                 back: geometry,
@@ -649,7 +652,16 @@ impl<'a> Stream<'a> {
                         break;
                     }
                 }
-                match Self::row(&t.spec, &mut job, &mut rc, slots, &mut self.rows, &mut sink, &mut stats) {
+                match Self::row(
+                    &t.spec,
+                    &mut job,
+                    &mut rc,
+                    slots,
+                    &mut self.rows,
+                    &mut follow,
+                    &mut sink,
+                    &mut stats,
+                ) {
                     Some(n) => done = done.saturating_add(n),
                     None => {
                         left = false;
@@ -715,13 +727,18 @@ impl<'a> Stream<'a> {
     }
 
     /// Contour the next row of `job` (see [`Phase`]) and move past it;
-    /// returns its cells, or `None` when it has none left.
+    /// returns its cells, or `None` when it has none left. `follow` is the
+    /// x-y row (slice, row) that `rc` and the upper of `rows` last left
+    /// ready as its lower row: such a row decodes and classes its upper
+    /// samples alone.
+    #[allow(clippy::too_many_arguments)]
     fn row(
         spec: &VolumeSpec,
         job: &mut Job,
         rc: &mut RowContourer<'_>,
         [s0, s1]: [&[u8]; 2],
         rows: &mut [&mut [f32]; 2],
+        follow: &mut Option<(u16, u32)>,
         sink: &mut Keep<'_, '_, '_>,
         stats: &mut ContourStats,
     ) -> Option<usize> {
@@ -732,6 +749,12 @@ impl<'a> Stream<'a> {
         let at = job.next as usize;
         let ty = spec.sample_type;
         let (cur, prev): (&[u8], &[u8]) = if job.slot == 0 { (s0, s1) } else { (s1, s0) };
+        let follows = job.phase == Phase::Xy && *follow == Some((job.z, job.next));
+        *follow = None;
+        if follows {
+            // Last row's upper samples are this one's lower.
+            rows.swap(0, 1);
+        }
         let [r0, r1] = rows;
         let n = if job.phase == Phase::Yz { ny } else { nx };
         let (Some(l), Some(h)) = (r0.get_mut(..n), r1.get_mut(..n)) else {
@@ -741,12 +764,18 @@ impl<'a> Stream<'a> {
         match job.phase {
             Phase::Xy => {
                 // Rows `at` and `at + 1` of the x-y slice z.
-                decode(ty, cur, at * nx, 1, l);
                 decode(ty, cur, (at + 1) * nx, 1, h);
                 let z = f32::from(job.z);
                 sink.enter_slice(2, job.z);
-                let _ = rc.row(l, h, at, |x, y| Point3::new(x, y, z), sink, stats);
+                let place = |x, y| Point3::new(x, y, z);
+                let _ = if follows {
+                    rc.next_row(l, h, at, place, sink, stats)
+                } else {
+                    decode(ty, cur, at * nx, 1, l);
+                    rc.row(l, h, at, place, sink, stats)
+                };
                 job.next += 1;
+                *follow = Some((job.z, job.next));
             }
             Phase::Xz => {
                 // Row `z - 1` of subgrids of the x-z slice at y = `at`.
