@@ -154,8 +154,20 @@ function settings() {
   };
 }
 
+// Turn the view by the spin since it was last turned (`t`: the page's
+// clock in ms).
+let last = null;
+function spin(t) {
+  if (spinning && last !== null) {
+    view.yaw = ((view.yaw + (SPIN_DEG_PER_S * (t - last)) / 1000 + 180) % 360) - 180;
+    changed();
+  }
+  last = t;
+}
+
 // Ask for the frame if anything changed, one frame at a time: changes made
-// while one is built go into the next.
+// while one is built go into the next, which is asked for as soon as this
+// one is on the screen (not at the next animation frame).
 async function redraw() {
   if (!dirty || building || loading) return;
   dirty = false;
@@ -180,6 +192,9 @@ async function redraw() {
   } finally {
     building = false;
   }
+  spin(performance.now());
+  // (A hidden page waits for the animation frames, which stop.)
+  if (dirty && !document.hidden) redraw();
 }
 
 const fmt = (n) => Number(n).toLocaleString('en');
@@ -375,13 +390,8 @@ function wireControls() {
   }
 }
 
-let last = null;
-function tick(t) {
-  if (spinning && last !== null) {
-    view.yaw = ((view.yaw + (SPIN_DEG_PER_S * (t - last)) / 1000 + 180) % 360) - 180;
-    changed();
-  }
-  last = t;
+function tick() {
+  spin(performance.now());
   redraw();
   showBusy(performance.now());
   requestAnimationFrame(tick);
