@@ -1654,6 +1654,31 @@ fn board_config() -> EngineConfig {
     EngineConfig { defer_contouring: true, ..EngineConfig::default() }
 }
 
+/// A board with nothing recorded, in `mem`, sent `new` and showing it: the
+/// picture a board that played something else before must draw.
+fn fresh_board<'m>(mem: &'m mut Firmware, new: &Vol) -> Engine<'m> {
+    let mut f = Engine::new(board_config(), mem.buffers()).unwrap();
+    feed_deferring(&mut f, &Host::new().volume(new), 256, 2000);
+    assert!(f.update(0));
+    f
+}
+
+/// The update at `now` that commits, as a board makes it: the samples the
+/// commit's polls take (300 a poll) and the rest of the frame then
+/// playing ([`Engine::unfinished`]), and how many polls there were.
+fn commit_playing(e: &mut Engine<'_>, now: u32) -> (Vec<isoscope_core::output::Sample>, usize) {
+    let mut during = Vec::new();
+    let mut calls = 0;
+    assert!(e.update_playing(now, &mut |p| {
+        calls += 1;
+        p.fill_with(300, |s| during.push(s));
+    }));
+    if let Some(p) = e.unfinished() {
+        during.extend(p);
+    }
+    (during, calls)
+}
+
 /// A board over `mem` showing a still torus 12^3 (`u8`), whose recording
 /// fits the tail; and the host that sent it.
 fn board_showing_a_torus(mem: &mut Firmware) -> (Engine<'_>, Host) {
@@ -1739,15 +1764,7 @@ fn a_still_picture_plays_on_from_the_tail_through_a_volume_and_its_commit() {
         }
 
         // The commit: the old frame plays on, over and over, then to its end.
-        let mut during = Vec::new();
-        let mut calls = 0;
-        assert!(e.update_playing(4, &mut |p| {
-            calls += 1;
-            p.fill_with(300, |s| during.push(s));
-        }));
-        if let Some(p) = e.unfinished() {
-            during.extend(p);
-        }
+        let (during, calls) = commit_playing(&mut e, 4);
         assert!(e.unfinished().is_none(), "taken once");
         if plays {
             assert!(calls > 1, "{calls} polls");
@@ -1759,9 +1776,7 @@ fn a_still_picture_plays_on_from_the_tail_through_a_volume_and_its_commit() {
 
         // The new picture is the one a board with nothing recorded draws.
         let mut fresh = Box::new(Firmware::new());
-        let mut f = Engine::new(board_config(), fresh.buffers()).unwrap();
-        feed_deferring(&mut f, &Host::new().volume(&new), 256, 2000);
-        assert!(f.update(0));
+        let f = fresh_board(&mut fresh, &new);
         assert_eq!(e.chain_stats(), f.chain_stats());
         assert!(picture(&e) == picture(&f), "the same picture, bit for bit");
         let want: Vec<_> = f.frame().collect();
@@ -1803,23 +1818,13 @@ fn a_commit_short_of_memory_plays_the_old_picture_thinned() {
     assert!(3 * thin.len() < 2 * first.len(), "{} of {} samples", thin.len(), first.len());
 
     assert!(!e.commit_parks(), "the commit plays it on");
-    let mut during = Vec::new();
-    let mut calls = 0;
-    assert!(e.update_playing(5, &mut |p| {
-        calls += 1;
-        p.fill_with(300, |s| during.push(s));
-    }));
-    if let Some(p) = e.unfinished() {
-        during.extend(p);
-    }
+    let (during, calls) = commit_playing(&mut e, 5);
     assert!(calls > 1, "{calls} polls");
     assert!(during.len() >= thin.len() && during.len() % thin.len() == 0, "{}", during.len());
     assert!(during.chunks(thin.len()).all(|f| f == thin), "whole frames of the thinned picture");
 
     let mut fresh = Box::new(Firmware::new());
-    let mut f = Engine::new(board_config(), fresh.buffers()).unwrap();
-    feed_deferring(&mut f, &Host::new().volume(&new), 256, 2000);
-    assert!(f.update(0));
+    let f = fresh_board(&mut fresh, &new);
     assert_eq!(e.chain_stats(), f.chain_stats());
     assert!(picture(&e) == picture(&f), "the same picture, bit for bit");
 }
@@ -1968,13 +1973,7 @@ fn a_spinning_picture_is_held_and_recorded_as_it_plays_before_a_commit() {
     let (held, replayed) = board_frame(&mut e);
     assert!(!replayed, "recorded as it plays");
     assert!(!e.commit_parks(), "the commit plays it on");
-    let mut during = Vec::new();
-    e.update_playing(0, &mut |p| {
-        p.fill_with(300, |s| during.push(s));
-    });
-    if let Some(p) = e.unfinished() {
-        during.extend(p);
-    }
+    let (during, _) = commit_playing(&mut e, 0);
     assert!(
         !during.is_empty() && during.chunks(held.len()).all(|f| f == held),
         "the held frame, over and over: {} of {}",
