@@ -774,6 +774,8 @@ fn board_preset_says_what_the_board_cannot_hold() {
         "{err}"
     );
     assert!(text(&out.stdout).contains("every=2\n"), "{}", text(&out.stdout));
+    // The volume the picture is of, as stats says it (scripts/scene-figures).
+    assert!(text(&out.stdout).contains("\ndims=12x12x12\n"), "{}", text(&out.stdout));
     // Too wide for a slice: from the smallest factor that fits on.
     let out = run(&["stats", "--demo", "gyroid:100", "--board", "f407"]);
     let err = text(&out.stderr);
