@@ -30,6 +30,13 @@ use std::sync::OnceLock;
 /// The most samples of a frame played and compared.
 const MAX_FRAME: usize = 20_000;
 
+/// The fewest line bytes fed between two frames played and compared.
+/// Every third chunk is played through, but not more often than this:
+/// with one-byte chunks a frame every third byte made playing the same
+/// frame again most of a run, while the engine's state changes at most
+/// once a frame on the line (some 20 bytes and up).
+const FRAME_EVERY_BYTES: usize = 48;
+
 /// A small volume every run ends with: 4x3x3, so that checking it (a
 /// contouring, a commit and the surface compared) costs a fraction of a
 /// run (a 6x5x4 one took some three quarters of the engine target's
@@ -155,9 +162,12 @@ fuzz_target!(|data: &[u8]| {
     e.replay_frames(true);
     let mut dec = FrameDecoder::<256>::new();
     let mut now = 0u32;
+    let mut since_frame = FRAME_EVERY_BYTES;
     for (k, c) in line.chunks(chunk).enumerate() {
         now = now.wrapping_add(step);
-        if k % 3 == 0 {
+        since_frame += c.len();
+        if k % 3 == 0 && since_frame >= FRAME_EVERY_BYTES {
+            since_frame = 0;
             // The frame as the board plays it (scheduled, recorded or
             // replayed) is the engine's frame, sample for sample.
             let live: Vec<Sample> = e.frame().take(MAX_FRAME).collect();
