@@ -576,6 +576,7 @@ impl Phosphor {
 
     /// Let the phosphor fade between frames: multiply every pixel's energy by
     /// [`PhosphorConfig::persistence`].
+    #[cfg_attr(target_arch = "wasm32", target_feature(enable = "simd128"))]
     pub fn decay(&mut self) {
         let k = self.cfg.persistence;
         self.energy.iter_mut().for_each(|e| *e *= k);
@@ -602,6 +603,7 @@ impl Phosphor {
     }
 
     /// The picture, `N` bytes a pixel: RGB, then 255 for the rest.
+    #[cfg_attr(target_arch = "wasm32", target_feature(enable = "simd128"))]
     fn to_pixels<const N: usize>(&self) -> Vec<u8> {
         let glow = self.cfg.glow;
         // The energy seen, glow included.
@@ -688,6 +690,7 @@ impl Phosphor {
     }
 
     /// A Gaussian spot of energy `e` at `c`.
+    #[cfg_attr(target_arch = "wasm32", target_feature(enable = "simd128"))]
     fn spot(&mut self, c: (f32, f32), e: f32) {
         let r = self.reach;
         let (Some((i0, i1)), Some((j0, j1))) = (
@@ -717,6 +720,7 @@ impl Phosphor {
 
     /// A step from `a` to `b` depositing energy `e`: the spot integrated
     /// along the segment.
+    #[cfg_attr(target_arch = "wasm32", target_feature(enable = "simd128"))]
     fn segment(&mut self, a: (f32, f32), b: (f32, f32), e: f32) {
         let (dx, dy) = (b.0 - a.0, b.1 - a.1);
         let len = (dx * dx + dy * dy).sqrt();
@@ -825,6 +829,7 @@ fn erf(x: f32) -> f32 {
 
 /// A separable Gaussian blur of standard deviation `sigma` pixels (kernel
 /// cut at 3 σ and normalised, zero outside the image).
+#[cfg_attr(target_arch = "wasm32", target_feature(enable = "simd128"))]
 fn blur(src: &[f32], width: usize, height: usize, sigma: f32) -> Vec<f32> {
     let half = (3.0 * sigma).ceil() as usize;
     let mut kernel: Vec<f32> = (0..=2 * half)
