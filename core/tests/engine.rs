@@ -964,6 +964,54 @@ fn a_surface_larger_than_memory_is_thinned_to_whole_slices_not_cut() {
 }
 
 #[test]
+fn a_surface_said_to_have_outgrown_the_memory_is_never_drawn_whole() {
+    // A host whose memory grows gives up a transfer once the engine says
+    // the surface has outgrown it (`isoscope-sim`'s scenes), which is only
+    // right if such a surface would not have been drawn whole: frame by
+    // frame, over backs from a tenth of the pieces to all of them.
+    let mut said = 0;
+    for (demo, n, ty, every) in [
+        (Demo::Gyroid, 16, SampleType::U8, 1),
+        (Demo::Hydrogen, 18, SampleType::F32, 1),
+        (Demo::Torus, 20, SampleType::I16, 3),
+    ] {
+        let v = Vol { every, ..Vol::demo(demo, n, ty) };
+        let mut mem = big();
+        let mut whole = engine(&mut mem);
+        whole.feed(&Host::new().volume(&v), 0);
+        whole.update(0);
+        let pieces = whole.chain_stats().points_in as usize;
+        for tenths in [1, 3, 5, 8, 10, 12] {
+            let back = pieces * tenths / 10;
+            let mut mem = Mem::sized(2 * v.slice_bytes(), n, [back; 2], 8 * back);
+            let mut e = engine(&mut mem);
+            let mut host = Host::new();
+            let mut frames = vec![host.hello(), host.begin(&v)];
+            frames.extend(host.slices(&v, 200));
+            frames.push(host.end());
+            let mut outgrown = false;
+            for f in &frames {
+                e.feed(f, 0);
+                outgrown |= e.outgrown();
+            }
+            e.update(0);
+            assert!(!e.outgrown(), "{demo:?}: outgrown between transfers");
+            let (committed, stitched) = strides(&events(&mut e));
+            let (Some((asked, drawn, dropped)), Some((every, cut))) = (committed, stitched) else {
+                panic!("{demo:?} at {tenths}/10: {committed:?} {stitched:?}")
+            };
+            let asked = u16::from(asked.max(1));
+            let drawn_whole = dropped == 0 && drawn == asked && every == drawn && cut == 0;
+            assert!(!(outgrown && drawn_whole), "{demo:?} at {tenths}/10: said outgrown, drawn whole");
+            // Thinned or dropped while arriving: said so on the way.
+            assert_eq!(outgrown, drawn > asked || dropped > 0, "{demo:?} at {tenths}/10");
+            said += usize::from(outgrown);
+        }
+    }
+    assert!(said >= 3, "only {said} transfers outgrew their memory");
+}
+
+#[test]
 fn a_surface_larger_than_memory_at_the_coarsest_stride_is_cut_and_counted() {
     // 500 points hold no stride of this gyroid: at the coarsest (every
     // 8th of 16: slices 0 and 8 of each plane) it is cut, and said to be.

@@ -195,6 +195,34 @@ impl<'a> InProcess<'a> {
         cfg: &SendConfig,
         progress: Option<&Progress>,
     ) -> Result<Loaded> {
+        // Not giving up, it always has a picture to report.
+        self.load_within(vol, cfg, progress, false).map(Option::unwrap_or_default)
+    }
+
+    /// [`InProcess::load`], given up as soon as the surface has outgrown
+    /// the board's memory ([`Engine::outgrown`]): `None` then, and the
+    /// board left in the middle of the transfer. For a memory that grows:
+    /// the picture would not have been whole, so the rest of the volume
+    /// need not be contoured before trying a larger one.
+    ///
+    /// # Errors
+    /// As [`InProcess::load`].
+    pub fn load_unless_outgrown(
+        &mut self,
+        vol: &WireVolume,
+        cfg: &SendConfig,
+        progress: Option<&Progress>,
+    ) -> Result<Option<Loaded>> {
+        self.load_within(vol, cfg, progress, true)
+    }
+
+    fn load_within(
+        &mut self,
+        vol: &WireVolume,
+        cfg: &SendConfig,
+        progress: Option<&Progress>,
+        give_up: bool,
+    ) -> Result<Option<Loaded>> {
         let levels = Levels::from_slice(&cfg.levels)
             .with_context(|| format!("at most {MAX_LEVELS} levels go to the board"))?;
         let t0 = web_time::Instant::now();
@@ -204,12 +232,15 @@ impl<'a> InProcess<'a> {
             if let Some(p) = progress {
                 p.inc();
             }
+            if give_up && self.engine.outgrown() {
+                return Ok(None);
+            }
         }
         let t1 = web_time::Instant::now();
         self.engine.update(self.now_ms);
         self.loaded.seconds = [(t1 - t0).as_secs_f64(), t1.elapsed().as_secs_f64()];
         self.events()?;
-        Ok(self.loaded)
+        Ok(Some(self.loaded))
     }
 
     /// Set the view's angles and projection, as `send --yaw ...` does

@@ -196,7 +196,9 @@ fn first_capacity(vol: &WireVolume, memory: Memory, points: usize) -> Capacity {
 
 /// Put `vol` on an in-process board with `cfg`'s memory and settings, and
 /// hand it to `f`. With [`Memory::Host`] the memory grows until the whole
-/// surface fits (contouring again each time). `progress` counts the frames
+/// surface fits: a size the surface outgrows is given up as soon as the
+/// engine says so ([`isoscope_core::engine::Engine::outgrown`]), and the volume sent again
+/// to one four times larger. `progress` counts the frames
 /// fed ([`crate::board::frames_for`]).
 ///
 /// # Errors
@@ -242,8 +244,16 @@ pub fn with_board_from<R>(
     loop {
         let mut mem = HostBuffers::new(&capacity);
         let mut board = InProcess::new(&mut mem, cfg.engine())?;
-        let loaded = match board.load(vol, &send, progress) {
-            Ok(l) => l,
+        // A memory that can grow gives up on a surface as soon as it has
+        // outgrown it: the picture is the larger memory's either way.
+        let can_grow = cfg.memory == Memory::Host && capacity.points < HOST_MAX_POINTS;
+        let loaded = if can_grow {
+            board.load_unless_outgrown(vol, &send, progress)
+        } else {
+            board.load(vol, &send, progress).map(Some)
+        };
+        let whole = match loaded {
+            Ok(loaded) => loaded.is_some_and(|l| l.whole()),
             Err(e) if e.downcast_ref::<Refused>() == Some(&Refused(NackCode::DimsOverCapacity)) => bail!(
                 "a {}x{} slice of {:?} is {} bytes; {} holds {} (send a smaller or resampled volume)",
                 vol.dims[0],
@@ -258,8 +268,7 @@ pub fn with_board_from<R>(
             ),
             Err(e) => return Err(e.context("putting the volume on the board")),
         };
-        let grow = cfg.memory == Memory::Host && !loaded.whole() && capacity.points < HOST_MAX_POINTS;
-        if grow {
+        if can_grow && !whole {
             capacity = host_capacity(capacity.slice_bytes, capacity.extent, capacity.points * 4);
             // The volume is fed again from its first frame.
             if let Some(p) = progress {

@@ -819,6 +819,20 @@ impl<'a> Engine<'a> {
         self.dev.shown.and(Some(&self.front))
     }
 
+    /// Whether the volume being received has outgrown the memory already:
+    /// its slices thinned to a coarser stride than it asked for, or
+    /// commands dropped. Its picture will not be the whole surface, so a
+    /// host that can give an engine more memory stops sending here and
+    /// starts again with more (`isoscope-sim`'s growing memory) rather
+    /// than contour the rest for nothing. False between transfers.
+    pub fn outgrown(&self) -> bool {
+        self.dev.stream.transfer.is_some_and(|t| {
+            t.stride.every > u16::from(t.spec.every.max(1))
+                || self.back.dropped() > 0
+                || self.dev.stream.spilled().dropped() > 0
+        })
+    }
+
     /// What stitching and ordering did to the last volume.
     pub fn chain_stats(&self) -> ChainStats {
         self.chain
