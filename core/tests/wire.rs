@@ -418,3 +418,33 @@ fn a_zero_inside_a_cobs_block_is_bad_cobs() {
     assert_eq!(decode_frame(&mut frame), Err(WireError::BadCobs));
     assert_eq!(isoscope_core::wire::cobs_decode_in_place(&mut hex("0301000a")), Err(WireError::BadCobs));
 }
+
+/// CRC-32/ISO-HDLC bit by bit, as the specification gives it.
+fn crc32_bitwise(data: &[u8]) -> u32 {
+    let mut crc = !0u32;
+    for &b in data {
+        crc ^= u32::from(b);
+        for _ in 0..8 {
+            crc = if crc & 1 == 1 { (crc >> 1) ^ 0xEDB8_8320 } else { crc >> 1 };
+        }
+    }
+    !crc
+}
+
+#[test]
+fn crc32_is_the_standard_check_value_and_the_bitwise_crc_of_every_byte_pair() {
+    assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
+    assert_eq!(crc32(&[]), 0);
+    for a in 0..=255u8 {
+        for b in 0..=255u8 {
+            assert_eq!(crc32(&[a, b]), crc32_bitwise(&[a, b]), "{a:#04x} {b:#04x}");
+        }
+    }
+}
+
+proptest! {
+    #[test]
+    fn crc32_is_the_bitwise_crc(data in prop::collection::vec(any::<u8>(), 0..600)) {
+        prop_assert_eq!(crc32(&data), crc32_bitwise(&data));
+    }
+}
