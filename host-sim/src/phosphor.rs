@@ -618,11 +618,13 @@ impl Phosphor {
         };
         // To table indices (a vector loop), then colours.
         let (exposure, top) = (self.cfg.exposure, (LUT_SIZE - 1) as f32);
-        let index: Vec<u32> = seen
-            .iter()
+        // A plain loop, not `map` and `collect`: the closure would be a
+        // function of its own, without this one's SIMD.
+        let mut index = vec![0u32; seen.len()];
+        for (i, &e) in index.iter_mut().zip(&seen) {
             // `v` is in 0..=1 (NaN only for a NaN energy, which `as` maps to 0).
-            .map(|&e| ((1.0 - exp_neg(-exposure * e)) * top + 0.5).clamp(0.0, top) as u32)
-            .collect();
+            *i = ((1.0 - exp_neg(-exposure * e)) * top + 0.5).clamp(0.0, top) as u32;
+        }
         let mut out = vec![u8::MAX; seen.len() * N];
         for (px, &i) in out.chunks_exact_mut(N).zip(&index) {
             px[..3].copy_from_slice(&self.lut[(i as usize).min(LUT_SIZE - 1)]);
@@ -702,10 +704,11 @@ impl Phosphor {
         let a = self.inv_2s2;
         let mut gx = std::mem::take(&mut self.scratch);
         gx.clear();
-        gx.extend((i0..=i1).map(|i| {
+        gx.resize(i1 - i0 + 1, 0.0);
+        for (g, i) in gx.iter_mut().zip(i0..) {
             let d = i as f32 + 0.5 - c.0;
-            exp_neg(-d * d * a)
-        }));
+            *g = exp_neg(-d * d * a);
+        }
         let scale = e * self.norm2;
         for j in j0..=j1 {
             let d = j as f32 + 0.5 - c.1;
