@@ -103,7 +103,11 @@ fn main() -> ! {
 /// would, drop the answers (nobody asked), draw it.
 fn boot(engine: &mut Engine<'_>) {
     let t0 = clock::cycles();
-    if isoscope_scene::boot_frames(|frame| isoscope_scene::feed_all(engine, frame, clock::now_ms())).is_err()
+    // Nothing plays yet: the contouring deferred is done as the frames come.
+    if isoscope_scene::boot_frames(|frame| {
+        engine.feed_all(frame, clock::now_ms());
+    })
+    .is_err()
     {
         defmt::error!("isoscope: the boot volume could not be encoded");
     }

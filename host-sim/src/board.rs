@@ -130,19 +130,10 @@ impl<'a> InProcess<'a> {
     fn feed(&mut self, msg: &Message<'_>) -> Result<()> {
         let len = encode(msg, &mut self.frame).map_err(|e| anyhow!("cannot encode {msg:?}: {e}"))?.len();
         for _ in 0..BUSY_RETRIES {
-            let mut rest = self.frame.get(..len).unwrap_or_default();
-            loop {
-                let (mut link, _) = self.engine.split();
-                while !link.waits() && link.contour(usize::MAX) {}
-                if link.waits() {
-                    self.engine.update(self.now_ms);
-                    continue;
-                }
-                if rest.is_empty() {
-                    break;
-                }
-                let n = link.feed(rest, self.now_ms);
-                rest = rest.get(n..).unwrap_or_default();
+            let frame = self.frame.get(..len).unwrap_or_default();
+            let taken = self.engine.feed_all(frame, self.now_ms);
+            if taken < frame.len() {
+                bail!("the engine took {taken} bytes of a {}-byte frame and no more", frame.len());
             }
             let mut sink = [0u8; 256];
             while self.engine.transmit(&mut sink) > 0 {}

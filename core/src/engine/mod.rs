@@ -247,6 +247,38 @@ impl<'a> Engine<'a> {
         }
     }
 
+    /// Take all of `bytes` at time `now_ms`, doing on the way what the
+    /// engine defers ([`EngineConfig::defer_contouring`]): the contouring
+    /// of each completed slice, and the [`Engine::update`] that contouring
+    /// waits for ([`Link::waits`]: to fold the surface arriving). For an
+    /// engine with no picture to keep playing meanwhile: a board's boot
+    /// volume, the host's board in process. (A board playing frames feeds
+    /// and contours between refills of its output instead.)
+    ///
+    /// Returns the bytes taken: all of them, unless the engine took none
+    /// with nothing left to do, which it does not (the bytes left are then
+    /// not taken, rather than tried for ever).
+    pub fn feed_all(&mut self, bytes: &[u8], now_ms: u32) -> usize {
+        let mut taken = 0;
+        loop {
+            let (mut link, _) = self.split();
+            while !link.waits() && link.contour(usize::MAX) {}
+            if link.waits() {
+                self.update(now_ms);
+                continue;
+            }
+            let rest = bytes.get(taken..).unwrap_or_default();
+            if rest.is_empty() {
+                return taken;
+            }
+            let n = link.feed(rest, now_ms);
+            if n == 0 && !link.busy() {
+                return taken;
+            }
+            taken += n;
+        }
+    }
+
     /// Move answer bytes for the UART into `out`; returns how many.
     pub fn transmit(&mut self, out: &mut [u8]) -> usize {
         self.split().0.transmit(out)

@@ -44,9 +44,7 @@ use isoscope_core::wire::{
     AXIS_X, AXIS_Y, AXIS_Z, FrameDecoder, Levels, MAX_CHUNK, MAX_FRAME_LEN, Message, PROTOCOL_VERSION,
     SampleType, encode,
 };
-use isoscope_scene::{
-    EXTENT, POINTS, QEMU_FRAMES, SLICE_BYTES, SURFACE_BYTES, boot_frames, engine_config, feed_all,
-};
+use isoscope_scene::{EXTENT, POINTS, QEMU_FRAMES, SLICE_BYTES, SURFACE_BYTES, boot_frames, engine_config};
 use std::fmt::Write as _;
 use std::io::{Read, Write as _};
 use std::net::TcpStream;
@@ -184,7 +182,10 @@ struct Boot {
 fn boot_reference() -> Result<Boot, String> {
     let mut mem = Box::new(Memory::new());
     let mut engine = Engine::new(engine_config(), mem.buffers()).map_err(|e| format!("engine: {e}"))?;
-    boot_frames(|f| feed_all(&mut engine, f, 0)).map_err(|e| format!("boot volume: {e}"))?;
+    boot_frames(|f| {
+        engine.feed_all(f, 0);
+    })
+    .map_err(|e| format!("boot volume: {e}"))?;
     engine.update(0);
     let (mut points, mut polylines) = (0, 0);
     while let Some(ev) = engine.next_event() {

@@ -18,7 +18,7 @@
 #![deny(clippy::panic, clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 
 use isoscope_core::demo::Demo;
-use isoscope_core::engine::{Board, Engine, EngineConfig, Geometry};
+use isoscope_core::engine::{Board, EngineConfig, Geometry};
 use isoscope_core::wire::{
     AXIS_X, AXIS_Y, AXIS_Z, Levels, MAX_FRAME_LEN, Message, SampleType, WireError, encode,
 };
@@ -82,25 +82,6 @@ pub const FIRMWARE_VERSION: [u8; 3] = [0, 1, 0];
 /// same surface: both draw the same samples for the same volume.
 pub fn engine_config() -> EngineConfig {
     EngineConfig { firmware: FIRMWARE_VERSION, defer_contouring: true, ..BOARD.engine_config() }
-}
-
-/// Feed all of `bytes` to `engine`, doing any contouring it defers on the
-/// way (for the boot volume, which nothing needs to wait for).
-pub fn feed_all(engine: &mut Engine<'_>, mut bytes: &[u8], now_ms: u32) {
-    loop {
-        let (mut link, _) = engine.split();
-        while !link.waits() && link.contour(usize::MAX) {}
-        if link.waits() {
-            // (To fold the surface: a volume larger than the boot's.)
-            engine.update(now_ms);
-            continue;
-        }
-        if bytes.is_empty() {
-            return;
-        }
-        let n = link.feed(bytes, now_ms);
-        bytes = bytes.get(n..).unwrap_or_default();
-    }
 }
 
 /// Rows of a boot slice per `SliceData` chunk.
