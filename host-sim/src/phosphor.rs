@@ -60,8 +60,12 @@
 //! branch-free `2^n e^f` with a polynomial for `e^f` (relative error below
 //! `3e-7`).
 //! Both are plain arithmetic, so the per-row loop over pixels runs as a
-//! vector loop (SSE2 on the baseline x86-64 target). Unit tests check both
-//! errors against references.
+//! vector loop (SSE2 on the baseline x86-64 target; SIMD128 in the web
+//! page, where the drawing functions are built with that feature one by
+//! one: plain IEEE lanes, so the page's picture is `render`'s byte for
+//! byte. Not the whole crate: so built, rustc 1.95 miscompiled the audio
+//! frame's code-to-unit conversion). Unit tests check both errors against
+//! references.
 //!
 //! # Tone mapping
 //!
