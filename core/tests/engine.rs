@@ -18,8 +18,11 @@ use isoscope_core::wire::{
 };
 use proptest::prelude::*;
 
+#[path = "common/cobs.rs"]
+mod cobs;
 #[path = "common/segments.rs"]
 mod segments;
+use cobs::cobs;
 use segments::{Seg, segments};
 use std::collections::HashSet;
 use std::convert::Infallible;
@@ -611,33 +614,6 @@ fn truncated_frame_garbage_and_wrong_version() {
         assert_eq!(codes[1..], [NackCode::Truncated, NackCode::BadVersion], "{codes:?}");
     });
     assert!(ev.iter().any(|x| matches!(x, Event::FrameError { .. })));
-}
-
-/// COBS-encode with the delimiter (independent of the core's encoder).
-fn cobs(data: &[u8]) -> Vec<u8> {
-    let mut out = vec![0];
-    let mut code_at = 0;
-    let mut code = 1u8;
-    for &b in data {
-        if b == 0 {
-            out[code_at] = code;
-            code_at = out.len();
-            out.push(0);
-            code = 1;
-        } else {
-            out.push(b);
-            code += 1;
-            if code == 0xFF {
-                out[code_at] = code;
-                code_at = out.len();
-                out.push(0);
-                code = 1;
-            }
-        }
-    }
-    out[code_at] = code;
-    out.push(0);
-    out
 }
 
 #[test]

@@ -11,6 +11,10 @@ use isoscope_core::wire::{
 };
 use proptest::prelude::*;
 
+#[path = "common/cobs.rs"]
+mod cobs;
+use cobs::cobs;
+
 fn hex(s: &str) -> Vec<u8> {
     (0..s.len()).step_by(2).map(|i| u8::from_str_radix(&s[i..i + 2], 16).unwrap()).collect()
 }
@@ -462,32 +466,6 @@ fn varint(mut v: u64, out: &mut Vec<u8>) {
     }
 }
 
-/// COBS with the delimiter, the textbook way.
-fn cobs_by_hand(data: &[u8]) -> Vec<u8> {
-    let mut out = vec![0];
-    let (mut code_at, mut code) = (0, 1u8);
-    for &b in data {
-        if b == 0 {
-            out[code_at] = code;
-            code_at = out.len();
-            out.push(0);
-            code = 1;
-        } else {
-            out.push(b);
-            code += 1;
-            if code == 0xFF {
-                out[code_at] = code;
-                code_at = out.len();
-                out.push(0);
-                code = 1;
-            }
-        }
-    }
-    out[code_at] = code;
-    out.push(0);
-    out
-}
-
 proptest! {
     /// A slice's bytes go to the framing whole (postcard bytes, CRC and
     /// COBS over runs): the frame is the one built byte by byte by hand,
@@ -512,6 +490,6 @@ proptest! {
         body.extend_from_slice(&crc32_bitwise(&body).to_le_bytes());
         let mut buf = vec![0u8; max_frame_len(data.len() + 16)];
         let frame = encode(&Message::SliceData { seq, slice, offset, data: &data }, &mut buf).unwrap();
-        prop_assert_eq!(frame, &cobs_by_hand(&body)[..]);
+        prop_assert_eq!(frame, &cobs(&body)[..]);
     }
 }
