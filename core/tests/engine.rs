@@ -904,30 +904,41 @@ fn strides(ev: &[Event]) -> (AtCommit, AtStitch) {
     (committed, stitched)
 }
 
+/// What an engine with plenty of memory ([`big`]) makes of `v`.
+fn with_plenty(v: &Vol) -> isoscope_core::engine::ChainStats {
+    let mut mem = big();
+    let mut whole = engine(&mut mem);
+    whole.feed(&Host::new().volume(v), 0);
+    whole.update(0);
+    whole.chain_stats()
+}
+
+/// Volumes that outgrow a back of a third of their pieces, one of them
+/// every 3rd slice: each demo, its size, the volume.
+fn outgrowing() -> [(Demo, usize, Vol); 3] {
+    [
+        (Demo::Gyroid, 16, SampleType::U8, 1),
+        (Demo::Hydrogen, 18, SampleType::F32, 1),
+        (Demo::Torus, 20, SampleType::I16, 3),
+    ]
+    .map(|(demo, n, ty, every)| (demo, n, Vol { every, ..Vol::demo(demo, n, ty) }))
+}
+
 #[test]
 fn a_surface_larger_than_memory_is_thinned_to_whole_slices_not_cut() {
     // A back of a third of the pieces and no room to spill: the stream
     // doubles the stride until the surface fits, and the picture is
     // exactly the surface contoured at that stride (whole slices of each
     // plane), not a part of the finer one.
-    for (demo, n, ty, every) in [
-        (Demo::Gyroid, 16, SampleType::U8, 1),
-        (Demo::Hydrogen, 18, SampleType::F32, 1),
-        (Demo::Torus, 20, SampleType::I16, 3),
-    ] {
-        let v = Vol { every, ..Vol::demo(demo, n, ty) };
-        let mut mem = big();
-        let mut whole = engine(&mut mem);
-        whole.feed(&Host::new().volume(&v), 0);
-        whole.update(0);
-        let pieces = whole.chain_stats().points_in as usize;
+    for (demo, n, v) in outgrowing() {
+        let pieces = with_plenty(&v).points_in as usize;
         let mut mem = Mem::sized(2 * v.slice_bytes(), n, [pieces; 2].map(|p| p / 3), 8 * pieces);
         let mut e = engine(&mut mem);
         e.feed(&Host::new().volume(&v), 0);
         let (committed, _) = strides(&events(&mut e));
         let Some((asked, thinned, 0)) = committed else { panic!("{demo:?}: {committed:?}") };
-        assert_eq!(asked, every);
-        assert!(thinned >= 2 * u16::from(every), "{demo:?}: every {thinned}");
+        assert_eq!(asked, v.every);
+        assert!(thinned >= 2 * u16::from(v.every), "{demo:?}: every {thinned}");
         e.update(0);
         let (_, stitched) = strides(&events(&mut e));
         assert_eq!(stitched, Some((thinned, 0)), "{demo:?}");
@@ -946,17 +957,8 @@ fn a_surface_said_to_have_outgrown_the_memory_is_never_drawn_whole() {
     // right if such a surface would not have been drawn whole: frame by
     // frame, over backs from a tenth of the pieces to all of them.
     let mut said = 0;
-    for (demo, n, ty, every) in [
-        (Demo::Gyroid, 16, SampleType::U8, 1),
-        (Demo::Hydrogen, 18, SampleType::F32, 1),
-        (Demo::Torus, 20, SampleType::I16, 3),
-    ] {
-        let v = Vol { every, ..Vol::demo(demo, n, ty) };
-        let mut mem = big();
-        let mut whole = engine(&mut mem);
-        whole.feed(&Host::new().volume(&v), 0);
-        whole.update(0);
-        let pieces = whole.chain_stats().points_in as usize;
+    for (demo, n, v) in outgrowing() {
+        let pieces = with_plenty(&v).points_in as usize;
         for tenths in [1, 3, 5, 8, 10, 12] {
             let back = pieces * tenths / 10;
             let mut mem = Mem::sized(2 * v.slice_bytes(), n, [back; 2], 8 * back);
@@ -1013,11 +1015,7 @@ fn a_picture_larger_than_the_front_is_thinned_at_the_commit() {
     // Every piece fits the back; stitched they do not fit a front of a
     // third of them: the commit thins the pieces and stitches again.
     let v = Vol { levels: vec![0.1], ..Vol::demo(Demo::Hydrogen, 16, SampleType::F32) };
-    let mut mem = big();
-    let mut whole = engine(&mut mem);
-    whole.feed(&Host::new().volume(&v), 0);
-    whole.update(0);
-    let points = whole.chain_stats().points_out as usize;
+    let points = with_plenty(&v).points_out as usize;
     let mut mem = Mem::sized(2 * 16 * 16 * 4, 16, [points / 3, 8000], 8 * 8000);
     let mut e = engine(&mut mem);
     e.feed(&Host::new().volume(&v), 0);
@@ -1150,11 +1148,7 @@ fn a_spilled_surface_draws_exactly_the_segments_of_whole_volume_contouring() {
         (Demo::Hydrogen, 18, SampleType::U16),
     ] {
         let v = Vol::demo(demo, n, ty);
-        let mut mem = big();
-        let mut whole = engine(&mut mem);
-        whole.feed(&Host::new().volume(&v), 0);
-        whole.update(0);
-        let pieces = whole.chain_stats().points_in as usize;
+        let pieces = with_plenty(&v).points_in as usize;
         // Stitching and ordering in scratch of their own (the slice memory
         // has just the room for the slices and the spill).
         let slices = 2 * v.slice_bytes() + Geometry::bytes_for(pieces);
