@@ -187,27 +187,18 @@ impl<'a> InProcess<'a> {
         progress: Option<&Progress>,
     ) -> Result<Loaded> {
         // Not giving up, it always has a picture to report.
-        self.load_within(vol, cfg, progress, false).map(Option::unwrap_or_default)
+        self.load_or_give_up(vol, cfg, progress, false).map(Option::unwrap_or_default)
     }
 
-    /// [`InProcess::load`], given up as soon as the surface has outgrown
-    /// the board's memory ([`Engine::outgrown`]): `None` then, and the
-    /// board left in the middle of the transfer. For a memory that grows:
-    /// the picture would not have been whole, so the rest of the volume
-    /// need not be contoured before trying a larger one.
+    /// [`InProcess::load`], given up, when `give_up` is set, as soon as
+    /// the surface has outgrown the board's memory ([`Engine::outgrown`]):
+    /// `None` then, and the board left in the middle of the transfer. For
+    /// a memory that grows: the picture would not have been whole, so the
+    /// rest of the volume need not be contoured before trying a larger one.
     ///
     /// # Errors
     /// As [`InProcess::load`].
-    pub fn load_unless_outgrown(
-        &mut self,
-        vol: &WireVolume,
-        cfg: &SendConfig,
-        progress: Option<&Progress>,
-    ) -> Result<Option<Loaded>> {
-        self.load_within(vol, cfg, progress, true)
-    }
-
-    fn load_within(
+    pub fn load_or_give_up(
         &mut self,
         vol: &WireVolume,
         cfg: &SendConfig,

@@ -247,12 +247,7 @@ pub fn with_board_from<R>(
         // A memory that can grow gives up on a surface as soon as it has
         // outgrown it: the picture is the larger memory's either way.
         let can_grow = cfg.memory == Memory::Host && capacity.points < HOST_MAX_POINTS;
-        let loaded = if can_grow {
-            board.load_unless_outgrown(vol, &send, progress)
-        } else {
-            board.load(vol, &send, progress).map(Some)
-        };
-        let whole = match loaded {
+        let whole = match board.load_or_give_up(vol, &send, progress, can_grow) {
             Ok(loaded) => loaded.is_some_and(|l| l.whole()),
             Err(e) if e.downcast_ref::<Refused>() == Some(&Refused(NackCode::DimsOverCapacity)) => bail!(
                 "a {}x{} slice of {:?} is {} bytes; {} holds {} (send a smaller or resampled volume)",
