@@ -924,6 +924,119 @@ fn outgrowing() -> [(Demo, usize, Vol); 3] {
     .map(|(demo, n, ty, every)| (demo, n, Vol { every, ..Vol::demo(demo, n, ty) }))
 }
 
+/// The messages of [`Host::volume`] (chunks of [`MAX_CHUNK`]), whole.
+fn volume_messages(v: &Vol) -> Vec<Message<'_>> {
+    let mut seq = 100u16;
+    let mut next = || {
+        seq = seq.wrapping_add(1);
+        seq
+    };
+    let mut out = vec![Message::Hello { protocol: PROTOCOL_VERSION, firmware: [0, 0, 0], seq: 101 }];
+    out.push(Message::BeginVolume {
+        seq: next(),
+        dims: v.dims,
+        sample_type: v.ty,
+        spacing: [1.0; 3],
+        levels: Levels::from_slice(&v.levels).unwrap(),
+        axes: v.axes,
+        every: v.every,
+    });
+    for (z, slice) in v.bytes.chunks(v.slice_bytes()).enumerate() {
+        for (k, data) in slice.chunks(MAX_CHUNK).enumerate() {
+            out.push(Message::SliceData {
+                seq: next(),
+                slice: z as u16,
+                offset: (k * MAX_CHUNK) as u32,
+                data,
+            });
+        }
+    }
+    out.push(Message::EndVolume { seq: next() });
+    out
+}
+
+#[test]
+fn a_message_handed_over_whole_does_exactly_what_its_frame_does() {
+    // `accept_all` (the host's board in process) against `feed_all` of the
+    // message's frame: the same answers, events, counters and picture,
+    // eager and deferred, with memory to spare and with a back so small
+    // that the surface is thinned (the contouring then waits for updates).
+    let roomy = |v: &Vol| Mem::new(v.slice_bytes(), 32, 200_000);
+    let tight = |v: &Vol| {
+        let pieces = with_plenty(v).points_in as usize;
+        Mem::sized(2 * v.slice_bytes(), 32, [pieces; 2].map(|p| p / 3), 8 * pieces)
+    };
+    let vols = [
+        Vol::demo(Demo::Hydrogen, 12, SampleType::U8),
+        Vol { axes: AXIS_X | AXIS_Z, ..Vol::demo(Demo::Torus, 14, SampleType::I16) },
+        Vol { every: 3, ..Vol::demo(Demo::Gyroid, 13, SampleType::F32) },
+    ];
+    let mut cases = 0;
+    for defer in [false, true] {
+        let cfg = EngineConfig { merge_tolerance: 0.0, defer_contouring: defer, ..EngineConfig::default() };
+        for v in vols.iter().chain(outgrowing().iter().map(|(_, _, v)| v)) {
+            for mem in [roomy, tight] {
+                let (mut ma, mut mb) = (mem(v), mem(v));
+                let mut a = Engine::new(cfg, ma.buffers()).unwrap();
+                let mut b = Engine::new(cfg, mb.buffers()).unwrap();
+                for (t, m) in (0u32..).zip(&volume_messages(v)) {
+                    let f = frame(m);
+                    assert_eq!(a.feed_all(&f, t), f.len());
+                    assert!(b.accept_all(m, t));
+                    assert_eq!(answers(&mut a), answers(&mut b), "answers to {m:?}");
+                    assert_eq!(events(&mut a), events(&mut b));
+                }
+                assert_eq!(a.counters(), b.counters());
+                assert!(a.update(1_000) && b.update(1_000));
+                assert_eq!(events(&mut a), events(&mut b));
+                assert!(!picture(&a).is_empty());
+                assert_eq!(picture(&a), picture(&b), "defer {defer}");
+                assert_eq!(a.frame().collect::<Vec<_>>(), b.frame().collect::<Vec<_>>());
+                cases += 1;
+            }
+        }
+    }
+    assert_eq!(cases, 24);
+}
+
+#[test]
+fn a_link_takes_a_message_whole_exactly_when_it_would_take_its_frame() {
+    // Deferring, as the firmware runs: while a completed slice's rows are
+    // pending (or the contouring waits for an update) `accept` refuses the
+    // message as `feed` takes none of its frame; the work done, both take it.
+    let v = Vol::demo(Demo::Gyroid, 13, SampleType::F32);
+    let cfg = EngineConfig { merge_tolerance: 0.0, defer_contouring: true, ..EngineConfig::default() };
+    let (mut ma, mut mb) = (big(), big());
+    let mut a = Engine::new(cfg, ma.buffers()).unwrap();
+    let mut b = Engine::new(cfg, mb.buffers()).unwrap();
+    let mut refused = 0;
+    for m in &volume_messages(&v) {
+        let f = frame(m);
+        loop {
+            let n = a.split().0.feed(&f, 0);
+            let took = b.split().0.accept(m.clone(), 0);
+            assert_eq!(took, n == f.len(), "{m:?}");
+            assert!(n == 0 || n == f.len());
+            if took {
+                break;
+            }
+            refused += 1;
+            for e in [&mut a, &mut b] {
+                let (mut link, _) = e.split();
+                if link.waits() {
+                    e.update(0);
+                } else {
+                    assert!(link.busy());
+                    link.contour(50);
+                }
+            }
+        }
+    }
+    assert!(refused > 0, "no message came while a slice was pending");
+    assert!(a.update(1) && b.update(1));
+    assert_eq!(picture(&a), picture(&b));
+}
+
 #[test]
 fn a_surface_larger_than_memory_is_thinned_to_whole_slices_not_cut() {
     // A back of a third of the pieces and no room to spill: the stream

@@ -1,17 +1,21 @@
 //! The board's engine on the host: its memory on the heap
-//! ([`HostBuffers`]), and a board in process ([`InProcess`]) that is fed the
-//! very frames `send` puts on the wire ([`crate::link::volume_messages`]),
-//! through the engine's own decoder, session, streaming contourer, stitch
-//! and order passes. Every host command that draws a picture (`render`,
+//! ([`HostBuffers`]), and a board in process ([`InProcess`]) that is handed
+//! the very messages `send` puts on the wire ([`crate::link::volume_messages`])
+//! whole ([`Engine::accept_all`]), through the engine's session, streaming
+//! contourer, stitch and order passes. Only the line is left out: encoding
+//! each message into its frame and decoding it again, a fifth of a large
+//! picture's work, gives the same message back (the wire's tests and the
+//! `message_roundtrip` fuzz target), and the virtual board (`device`) and
+//! the firmware take the frames themselves. Every host command that draws a picture (`render`,
 //! `stats`, `wav`, `contour --format svg`, `render --animate`) draws it
 //! this way, so its samples are the board's.
 
 use crate::link::{SendConfig, WireVolume, volume_messages};
 use crate::progress::Progress;
-use anyhow::{Context, Result, anyhow, bail};
+use anyhow::{Context, Result, bail};
 use isoscope_core::engine::{Buffers, Capacity, Engine, EngineConfig, Event, Geometry};
 use isoscope_core::view::View;
-use isoscope_core::wire::{Levels, MAX_FRAME_LEN, MAX_LEVELS, Message, NackCode, PROTOCOL_VERSION, encode};
+use isoscope_core::wire::{Levels, MAX_LEVELS, Message, NackCode, PROTOCOL_VERSION};
 
 /// The engine's memory on the heap.
 #[derive(Debug, Clone)]
@@ -84,7 +88,7 @@ impl Loaded {
     }
 }
 
-/// A board in process: the engine, fed messages as frames.
+/// A board in process: the engine, handed messages whole.
 #[derive(Debug)]
 pub struct InProcess<'a> {
     engine: Engine<'a>,
@@ -92,7 +96,6 @@ pub struct InProcess<'a> {
     seq: u16,
     now_ms: u32,
     loaded: Loaded,
-    frame: Vec<u8>,
 }
 
 impl<'a> InProcess<'a> {
@@ -102,8 +105,7 @@ impl<'a> InProcess<'a> {
     /// Invalid settings or buffers.
     pub fn new(mem: &'a mut HostBuffers, cfg: EngineConfig) -> Result<Self> {
         let engine = Engine::new(cfg, mem.buffers()).context("cannot start the engine")?;
-        let mut board =
-            Self { engine, seq: 0, now_ms: 0, loaded: Loaded::default(), frame: vec![0; MAX_FRAME_LEN] };
+        let mut board = Self { engine, seq: 0, now_ms: 0, loaded: Loaded::default() };
         board.feed(&Message::Hello { protocol: PROTOCOL_VERSION, firmware: [0; 3], seq: 0 })?;
         Ok(board)
     }
@@ -118,8 +120,9 @@ impl<'a> InProcess<'a> {
         self.loaded
     }
 
-    /// Encode `msg` and feed it to the engine as the UART would, doing the
-    /// contouring it defers; its answers are dropped, its events read.
+    /// Hand `msg` to the engine as if its frame had come over the UART,
+    /// doing the contouring it defers; its answers are dropped, its events
+    /// read.
     ///
     /// # Errors
     /// The board refused the command (a `Nack`).
@@ -128,12 +131,9 @@ impl<'a> InProcess<'a> {
     /// [`Link::waits`](isoscope_core::engine::Link::waits)) gets its update at once, and a command answered
     /// `Busy` meanwhile is sent again, as a sender would.
     fn feed(&mut self, msg: &Message<'_>) -> Result<()> {
-        let len = encode(msg, &mut self.frame).map_err(|e| anyhow!("cannot encode {msg:?}: {e}"))?.len();
         for _ in 0..BUSY_RETRIES {
-            let frame = self.frame.get(..len).unwrap_or_default();
-            let taken = self.engine.feed_all(frame, self.now_ms);
-            if taken < frame.len() {
-                bail!("the engine took {taken} bytes of a {}-byte frame and no more", frame.len());
+            if !self.engine.accept_all(msg, self.now_ms) {
+                bail!("the engine took no more messages (a volume's command left untaken)");
             }
             let mut sink = [0u8; 256];
             while self.engine.transmit(&mut sink) > 0 {}

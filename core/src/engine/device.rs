@@ -184,13 +184,15 @@ impl Device<'_> {
         }
     }
 
-    pub(super) fn handle(
-        &mut self,
-        msg: Message<'_>,
-        now_ms: u32,
-        back: &mut Geometry<'_>,
-        slots: &mut [u8],
-    ) {
+    /// A message decoded from the line, or handed over whole
+    /// ([`Link::accept`](super::Link::accept)): counted as a frame and
+    /// handled.
+    pub(super) fn take(&mut self, msg: Message<'_>, now_ms: u32, back: &mut Geometry<'_>, slots: &mut [u8]) {
+        self.counters.frames = self.counters.frames.wrapping_add(1);
+        self.handle(msg, now_ms, back, slots);
+    }
+
+    fn handle(&mut self, msg: Message<'_>, now_ms: u32, back: &mut Geometry<'_>, slots: &mut [u8]) {
         let seq = match msg {
             Message::Hello { protocol, seq, .. } => {
                 self.abort(AbortReason::Restarted);

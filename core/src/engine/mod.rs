@@ -60,7 +60,7 @@ use crate::beam::replay::{self, Kept, Player, Replay};
 use crate::beam::{BeamConfig, FrameStats, Scheduler, frame_stats};
 use crate::command::Point3;
 use crate::view::{Bounds, View, ViewTransform};
-use crate::wire::{DeviceState, Levels, NackCode, ProtocolDecoder, WireError};
+use crate::wire::{DeviceState, Levels, Message, NackCode, ProtocolDecoder, WireError};
 use heapless::Deque;
 use session::Session;
 use stream::Stream;
@@ -260,6 +260,40 @@ impl<'a> Engine<'a> {
     /// not taken, rather than tried for ever).
     pub fn feed_all(&mut self, bytes: &[u8], now_ms: u32) -> usize {
         let mut taken = 0;
+        self.drive(now_ms, |link| {
+            let rest = bytes.get(taken..).unwrap_or_default();
+            if rest.is_empty() {
+                return None;
+            }
+            let n = link.feed(rest, now_ms);
+            taken += n;
+            Some(n > 0)
+        });
+        taken
+    }
+
+    /// [`Engine::feed_all`] for one message handed over whole
+    /// ([`Link::accept`]): the same work, and the same picture, as its
+    /// frame fed whole, without encoding and decoding the frame. Returns
+    /// whether it was taken (it is, unless the engine takes nothing with
+    /// nothing left to do, which it does not).
+    pub fn accept_all(&mut self, msg: &Message<'_>, now_ms: u32) -> bool {
+        let mut taken = false;
+        self.drive(now_ms, |link| {
+            if taken {
+                return None;
+            }
+            taken = link.accept(msg.clone(), now_ms);
+            Some(taken)
+        });
+        taken
+    }
+
+    /// The loop of [`Engine::feed_all`] and [`Engine::accept_all`]: the
+    /// contouring deferred and the updates it waits for done, then `take`
+    /// given the link, until it says it has nothing left (`None`), or it
+    /// took nothing (`Some(false)`) with no contouring pending.
+    fn drive(&mut self, now_ms: u32, mut take: impl FnMut(&mut Link<'_, '_>) -> Option<bool>) {
         loop {
             let (mut link, _) = self.split();
             while !link.waits() && link.contour(usize::MAX) {}
@@ -267,15 +301,11 @@ impl<'a> Engine<'a> {
                 self.update(now_ms);
                 continue;
             }
-            let rest = bytes.get(taken..).unwrap_or_default();
-            if rest.is_empty() {
-                return taken;
+            match take(&mut link) {
+                None => return,
+                Some(false) if !link.busy() => return,
+                Some(_) => {}
             }
-            let n = link.feed(rest, now_ms);
-            if n == 0 && !link.busy() {
-                return taken;
-            }
-            taken += n;
         }
     }
 
@@ -949,8 +979,7 @@ impl Link<'_, '_> {
             match self.decoder.push(b) {
                 None => {}
                 Some(Ok(msg)) => {
-                    self.dev.counters.frames = self.dev.counters.frames.wrapping_add(1);
-                    self.dev.handle(msg, now_ms, self.back, self.slots);
+                    self.dev.take(msg, now_ms, self.back, self.slots);
                     if (defer && self.dev.stream.busy()) || self.dev.stream.waits() {
                         return n + 1;
                     }
@@ -972,6 +1001,22 @@ impl Link<'_, '_> {
             }
         }
         bytes.len()
+    }
+
+    /// Take `msg` at time `now_ms` as if its frame had just been decoded
+    /// from the line ([`Link::feed`] without the bytes): for a sender in
+    /// the same process, which has the message itself and no line to
+    /// cross (the host's board in process, [`Engine::accept_all`]). Returns
+    /// whether it was taken: not while a completed slice's deferred
+    /// contouring is pending or the contouring waits for an update, as
+    /// [`Link::feed`] takes no bytes then.
+    pub fn accept(&mut self, msg: Message<'_>, now_ms: u32) -> bool {
+        self.dev.check_timeout(now_ms);
+        if (self.dev.cfg.defer_contouring && self.dev.stream.busy()) || self.dev.stream.waits() {
+            return false;
+        }
+        self.dev.take(msg, now_ms, self.back, self.slots);
+        true
     }
 
     /// Whether the contouring left waits for the next
