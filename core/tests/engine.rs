@@ -1014,7 +1014,7 @@ fn a_link_takes_a_message_whole_exactly_when_it_would_take_its_frame() {
         let f = frame(m);
         loop {
             let n = a.split().0.feed(&f, 0);
-            let took = b.split().0.accept(m.clone(), 0);
+            let took = b.split().0.accept(*m, 0);
             assert_eq!(took, n == f.len(), "{m:?}");
             assert!(n == 0 || n == f.len());
             if took {

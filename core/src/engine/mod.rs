@@ -283,7 +283,7 @@ impl<'a> Engine<'a> {
             if taken {
                 return None;
             }
-            taken = link.accept(msg.clone(), now_ms);
+            taken = link.accept(*msg, now_ms);
             Some(taken)
         });
         taken
