@@ -7,7 +7,7 @@
 //! volume would (the board re-projects the tour it made for the first
 //! view, without ordering again; every view fits the surface's bounding
 //! sphere, so the picture keeps its scale while it turns), and draws the
-//! board's frame on one [`Phosphor`] that keeps
+//! board's frame on one [`Screen`] (bands on the cores) that keeps
 //! [`PhosphorConfig::persistence`] of the frames before, so a moving line
 //! leaves the faint trail it leaves on a tube.
 //!
@@ -37,7 +37,7 @@
 
 use crate::board::InProcess;
 use crate::link::WireVolume;
-use crate::phosphor::{Phosphor, PhosphorConfig};
+use crate::phosphor::{PhosphorConfig, Screen};
 use crate::progress::Progress;
 use crate::scene::{SceneConfig, with_board};
 use anyhow::{Context, Result, anyhow, bail};
@@ -201,7 +201,8 @@ pub fn animate_board<W: Write>(
     anim.validate()?;
     let (width, height) = (picture.width, picture.height);
     let persistence = picture.persistence;
-    let mut screen = Phosphor::new(picture).context("invalid picture settings")?;
+    let mut screen =
+        Screen::new(picture, crate::scene::draw_threads()).context("invalid picture settings")?;
     let mut out = Counter { inner: out, bytes: 0 };
     let mut encoder = Encoder::new(&mut out, screen.config(), anim)?;
     let step = anim.step_deg();
@@ -220,7 +221,7 @@ pub fn animate_board<W: Write>(
         let t1 = Instant::now();
         for _ in 0..anim.refreshes {
             screen.decay();
-            screen.deposit(frame.iter().copied());
+            screen.deposit(&frame);
             if k >= 0 {
                 samples += frame.len() as u64;
             }

@@ -96,6 +96,7 @@ use isoscope_core::output::{Beam, Dac, Sample};
 use std::convert::Infallible;
 use std::fmt;
 use std::io::Write;
+use std::ops::Range;
 use std::path::Path;
 
 /// Largest accepted image width or height, in pixels.
@@ -461,6 +462,12 @@ pub struct Phosphor {
     cfg: PhosphorConfig,
     width: usize,
     height: usize,
+    /// The picture's rows this phosphor draws ([`Phosphor::band`]).
+    rows: Range<usize>,
+    /// The rows whose energy it keeps: `rows` and the glow's reach above
+    /// and below, within the picture.
+    kept: Range<usize>,
+    /// The energy of the `kept` rows.
     energy: Vec<f32>,
     /// The last sample deposited: where the beam is.
     prev: Option<Sample>,
@@ -488,8 +495,26 @@ impl Phosphor {
     /// # Errors
     /// [`PhosphorConfig::validate`]'s.
     pub fn new(cfg: PhosphorConfig) -> Result<Self, PhosphorError> {
+        let rows = 0..cfg.height as usize;
+        Self::band(cfg, rows)
+    }
+
+    /// A black screen that draws only the picture's rows `rows` (clamped
+    /// to the picture): exactly the bytes of those rows of the whole
+    /// picture, from the same samples. It deposits into them and as many
+    /// rows on either side as the glow reaches, so bands of one picture
+    /// drawn apart (on several cores) and stacked are the picture, bit for
+    /// bit: each pixel adds the same steps in the same order.
+    ///
+    /// # Errors
+    /// [`PhosphorConfig::validate`]'s.
+    pub fn band(cfg: PhosphorConfig, rows: Range<usize>) -> Result<Self, PhosphorError> {
         cfg.validate()?;
         let (width, height) = (cfg.width as usize, cfg.height as usize);
+        let rows = rows.start.min(height)..rows.end.min(height);
+        let rows = rows.start..rows.end.max(rows.start);
+        let reach = if cfg.glow.strength > 0.0 { glow_reach(cfg.glow.radius) } else { 0 };
+        let kept = rows.start.saturating_sub(reach)..(rows.end + reach).min(height);
         let codes = (1u32 << cfg.bits) as f32;
         let s = cfg.spot_sigma;
         let inv_gamma = 1.0 / cfg.gamma;
@@ -502,7 +527,9 @@ impl Phosphor {
         Ok(Self {
             width,
             height,
-            energy: vec![0.0; width * height],
+            energy: vec![0.0; width * kept.len()],
+            rows,
+            kept,
             prev: None,
             px_per_code: (cfg.width as f32 / codes, cfg.height as f32 / codes),
             inv_2s2: 1.0 / (2.0 * s * s),
@@ -532,9 +559,27 @@ impl Phosphor {
     }
 
     /// The energy of every pixel, row by row from the top, in units of
-    /// [`PhosphorConfig::energy_per_sample`] per pixel.
+    /// [`PhosphorConfig::energy_per_sample`] per pixel: of the rows kept
+    /// ([`Phosphor::kept`]), all of them for a whole picture.
     pub fn energy(&self) -> &[f32] {
         &self.energy
+    }
+
+    /// The picture's rows this phosphor draws ([`Phosphor::band`]).
+    pub fn rows(&self) -> Range<usize> {
+        self.rows.clone()
+    }
+
+    /// The rows whose energy [`Phosphor::energy`] holds: [`Phosphor::rows`]
+    /// and the glow's reach on either side, within the picture.
+    pub fn kept(&self) -> Range<usize> {
+        self.kept.clone()
+    }
+
+    /// Row `j`'s pixels `i0 ..= i1` of the energy, if `j` is kept.
+    fn energy_row(&mut self, j: usize, i0: usize, i1: usize) -> Option<&mut [f32]> {
+        let r = j.checked_sub(self.kept.start).filter(|_| j < self.kept.end)?;
+        self.energy.get_mut(r * self.width + i0..=r * self.width + i1)
     }
 
     /// The sum of [`Phosphor::energy`].
@@ -594,8 +639,8 @@ impl Phosphor {
     }
 
     /// The picture: `width * height` RGB pixels, 8 bits a channel, row by row
-    /// from the top. Glow, then `t = (1 - exp(-exposure * E))^(1 / gamma)`,
-    /// then the palette.
+    /// from the top (of a band, its rows alone). Glow, then
+    /// `t = (1 - exp(-exposure * E))^(1 / gamma)`, then the palette.
     pub fn to_rgb8(&self) -> Vec<u8> {
         self.to_pixels::<3>()
     }
@@ -610,15 +655,20 @@ impl Phosphor {
     #[cfg_attr(target_arch = "wasm32", target_feature(enable = "simd128"))]
     fn to_pixels<const N: usize>(&self) -> Vec<u8> {
         let glow = self.cfg.glow;
+        let w = self.width;
+        // The rows drawn, within the rows kept.
+        let drawn = self.rows.start - self.kept.start..self.rows.end - self.kept.start;
+        let energy = self.energy.get(drawn.start * w..drawn.end * w).unwrap_or_default();
         // The energy seen, glow included.
         let seen = if glow.strength > 0.0 {
-            let mut halo = blur(&self.energy, self.width, self.height, glow.radius);
-            for (h, &e) in halo.iter_mut().zip(&self.energy) {
+            let mut halo =
+                blur(&self.energy, w, self.kept.clone(), self.rows.clone(), self.height, glow.radius);
+            for (h, &e) in halo.iter_mut().zip(energy) {
                 *h = e + glow.strength * *h;
             }
             halo
         } else {
-            self.energy.clone()
+            energy.to_vec()
         };
         // To table indices (a vector loop), then colours.
         let (exposure, top) = (self.cfg.exposure, (LUT_SIZE - 1) as f32);
@@ -643,30 +693,13 @@ impl Phosphor {
     /// The file cannot be created or written ([`PhosphorError::Io`] or
     /// [`PhosphorError::Png`] inside, the path named).
     pub fn write_png(&self, path: impl AsRef<Path>) -> anyhow::Result<()> {
-        let path = path.as_ref();
-        crate::outfile::write_whole(path, |w| {
-            anyhow::Context::with_context(self.png_to(w).map_err(PhosphorError::from), || {
-                format!("cannot write {}", path.display())
-            })
-        })
+        write_png(path.as_ref(), self.cfg.width, self.rows.len(), &self.to_rgb8())
     }
 
-    /// The picture as the bytes of an 8-bit RGB PNG file.
+    /// The picture as the bytes of an 8-bit RGB PNG file (of a band, its
+    /// rows; none for a band of no rows).
     pub fn encode_png(&self) -> Vec<u8> {
-        let mut out = Vec::new();
-        // Writing to a `Vec` cannot fail, and the header always matches the
-        // data (a validated size, three bytes a pixel).
-        self.png_to(&mut out).expect("PNG encoding into memory cannot fail");
-        out
-    }
-
-    fn png_to<W: Write>(&self, w: W) -> Result<(), png::EncodingError> {
-        let mut enc = png::Encoder::new(w, self.cfg.width, self.cfg.height);
-        enc.set_color(png::ColorType::Rgb);
-        enc.set_depth(png::BitDepth::Eight);
-        let mut writer = enc.write_header()?;
-        writer.write_image_data(&self.to_rgb8())?;
-        writer.finish()
+        encode_png(self.cfg.width, self.rows.len(), &self.to_rgb8())
     }
 
     /// A sample's position in pixel coordinates (y down).
@@ -714,10 +747,10 @@ impl Phosphor {
             *g = exp_neg(-d * d * a);
         }
         let scale = e * self.norm2;
-        for j in j0..=j1 {
+        for j in j0.max(self.kept.start)..=j1.min(self.kept.end.saturating_sub(1)) {
             let d = j as f32 + 0.5 - c.1;
             let gy = scale * exp_neg(-d * d * a);
-            let row = &mut self.energy[j * self.width + i0..=j * self.width + i1];
+            let Some(row) = self.energy_row(j, i0, i1) else { continue };
             for (px, &g) in row.iter_mut().zip(&gx) {
                 *px += gy * g;
             }
@@ -744,7 +777,7 @@ impl Phosphor {
         let scale = e * self.norm1 / (2.0 * len);
         let (xlo, xhi) = (a.0.min(b.0) - r, a.0.max(b.0) + r);
         let (inv_ux, inv_uy) = (1.0 / ux, 1.0 / uy);
-        for j in j0..=j1 {
+        for j in j0.max(self.kept.start)..=j1.min(self.kept.end.saturating_sub(1)) {
             let ry = j as f32 + 0.5 - a.1;
             // Along the row, x = a.0 + t: the along coordinate is
             // u = t ux + ry uy, the signed distance d = -t uy + ry ux. Keep
@@ -757,7 +790,7 @@ impl Phosphor {
             };
             let t0 = i0 as f32 + 0.5 - a.0;
             let (u0, d0) = (t0 * ux + ry * uy, -t0 * uy + ry * ux);
-            let row = &mut self.energy[j * self.width + i0..=j * self.width + i1];
+            let Some(row) = self.energy_row(j, i0, i1) else { continue };
             for (n, px) in (0i32..).zip(row.iter_mut()) {
                 let m = n as f32;
                 let (u, d) = (u0 + m * ux, d0 - m * uy);
@@ -765,6 +798,134 @@ impl Phosphor {
             }
         }
     }
+}
+
+/// A picture drawn in bands of rows on threads of their own, each band a
+/// [`Phosphor::band`]: the bytes of one [`Phosphor`] from the same samples,
+/// in about `1 / n` of the time on `n` cores. (On one band, or where
+/// there are no threads, the band is drawn where it is called.)
+#[derive(Debug, Clone)]
+pub struct Screen {
+    cfg: PhosphorConfig,
+    bands: Vec<Phosphor>,
+}
+
+impl Screen {
+    /// A black screen of `bands` bands (at least one, at most a row each).
+    ///
+    /// # Errors
+    /// [`PhosphorConfig::validate`]'s.
+    pub fn new(cfg: PhosphorConfig, bands: usize) -> Result<Self, PhosphorError> {
+        let height = cfg.height as usize;
+        let n = bands.clamp(1, height.max(1));
+        let edge = |k: usize| k * height / n;
+        let bands =
+            (0..n).map(|k| Phosphor::band(cfg.clone(), edge(k)..edge(k + 1))).collect::<Result<_, _>>()?;
+        Ok(Self { cfg, bands })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &PhosphorConfig {
+        &self.cfg
+    }
+
+    /// [`Phosphor::clear`], every band.
+    pub fn clear(&mut self) {
+        self.bands.iter_mut().for_each(Phosphor::clear);
+    }
+
+    /// [`Phosphor::decay`], every band.
+    pub fn decay(&mut self) {
+        // A closure: on wasm `decay` has a target feature, which a function
+        // pointer cannot carry.
+        #[allow(clippy::redundant_closure_for_method_calls)]
+        self.bands.iter_mut().for_each(|p| p.decay());
+    }
+
+    /// [`Phosphor::deposit`] of `samples`, every band on a thread.
+    pub fn deposit(&mut self, samples: &[Sample]) {
+        self.each(|p| p.deposit(samples.iter().copied()));
+    }
+
+    /// [`Phosphor::to_rgb8`]: the bands' rows, worked out on threads.
+    pub fn to_rgb8(&self) -> Vec<u8> {
+        self.pixels(Phosphor::to_rgb8)
+    }
+
+    /// [`Phosphor::to_rgba8`]: the bands' rows, worked out on threads.
+    pub fn to_rgba8(&self) -> Vec<u8> {
+        self.pixels(Phosphor::to_rgba8)
+    }
+
+    /// [`Phosphor::write_png`].
+    ///
+    /// # Errors
+    /// As [`Phosphor::write_png`].
+    pub fn write_png(&self, path: impl AsRef<Path>) -> anyhow::Result<()> {
+        write_png(path.as_ref(), self.config().width, self.config().height as usize, &self.to_rgb8())
+    }
+
+    /// [`Phosphor::encode_png`].
+    pub fn encode_png(&self) -> Vec<u8> {
+        encode_png(self.config().width, self.config().height as usize, &self.to_rgb8())
+    }
+
+    fn each(&mut self, f: impl Fn(&mut Phosphor) + Sync) {
+        match self.bands.as_mut_slice() {
+            [one] => f(one),
+            bands => std::thread::scope(|s| {
+                let f = &f;
+                for b in bands {
+                    s.spawn(move || f(b));
+                }
+            }),
+        }
+    }
+
+    fn pixels(&self, f: impl Fn(&Phosphor) -> Vec<u8> + Sync) -> Vec<u8> {
+        match self.bands.as_slice() {
+            [one] => f(one),
+            bands => std::thread::scope(|s| {
+                let f = &f;
+                let parts: Vec<_> = bands.iter().map(|b| s.spawn(move || f(b))).collect();
+                // A band's panic (a bug) is the caller's.
+                parts
+                    .into_iter()
+                    .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                    .collect()
+            }),
+        }
+    }
+}
+
+/// An 8-bit RGB PNG of `rgb` (`width` pixels by `rows`), written whole or
+/// not at all ([`crate::outfile`]).
+fn write_png(path: &Path, width: u32, rows: usize, rgb: &[u8]) -> anyhow::Result<()> {
+    crate::outfile::write_whole(path, |w| {
+        anyhow::Context::with_context(png_to(w, width, rows, rgb).map_err(PhosphorError::from), || {
+            format!("cannot write {}", path.display())
+        })
+    })
+}
+
+/// The bytes of an 8-bit RGB PNG of `rgb` (`width` pixels by `rows`):
+/// none for no rows (writing to a `Vec` cannot fail otherwise, and the
+/// header matches the data: a validated size, three bytes a pixel).
+fn encode_png(width: u32, rows: usize, rgb: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
+    match png_to(&mut out, width, rows, rgb) {
+        Ok(()) => out,
+        Err(_) => Vec::new(),
+    }
+}
+
+fn png_to<W: Write>(w: W, width: u32, rows: usize, rgb: &[u8]) -> Result<(), png::EncodingError> {
+    let mut enc = png::Encoder::new(w, width, u32::try_from(rows).unwrap_or(u32::MAX));
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    let mut writer = enc.write_header()?;
+    writer.write_image_data(rgb)?;
+    writer.finish()
 }
 
 /// The largest integer `<= x` (saturating; NaN gives 0).
@@ -834,11 +995,26 @@ fn erf(x: f32) -> f32 {
     (1.0 - poly * exp_neg(-a * a)).copysign(x)
 }
 
+/// Rows a blur of standard deviation `sigma` reaches on either side: its
+/// kernel's half width.
+fn glow_reach(sigma: f32) -> usize {
+    (3.0 * sigma).ceil() as usize
+}
+
 /// A separable Gaussian blur of standard deviation `sigma` pixels (kernel
-/// cut at 3 σ and normalised, zero outside the image).
+/// cut at 3 σ and normalised, zero outside the image of `height` rows):
+/// rows `out` of it, from `src`, the image's rows `kept` (which must hold
+/// `out` and [`glow_reach`] rows on either side, within the image).
 #[cfg_attr(target_arch = "wasm32", target_feature(enable = "simd128"))]
-fn blur(src: &[f32], width: usize, height: usize, sigma: f32) -> Vec<f32> {
-    let half = (3.0 * sigma).ceil() as usize;
+fn blur(
+    src: &[f32],
+    width: usize,
+    kept: Range<usize>,
+    out: Range<usize>,
+    height: usize,
+    sigma: f32,
+) -> Vec<f32> {
+    let half = glow_reach(sigma);
     let mut kernel: Vec<f32> = (0..=2 * half)
         .map(|i| {
             let d = i as f32 - half as f32;
@@ -863,18 +1039,22 @@ fn blur(src: &[f32], width: usize, height: usize, sigma: f32) -> Vec<f32> {
         }
     }
     // Vertical: out row y += k[t] * tmp row (y + t - half).
-    let mut out = vec![0.0f32; src.len()];
-    for (y, orow) in out.chunks_exact_mut(width).enumerate() {
+    let mut dst = vec![0.0f32; out.len() * width];
+    for (y, orow) in out.zip(dst.chunks_exact_mut(width)) {
         for (t, &k) in kernel.iter().enumerate() {
             let Some(sy) = (y + t).checked_sub(half).filter(|&sy| sy < height) else {
                 continue;
             };
-            for (o, &s) in orow.iter_mut().zip(&tmp[sy * width..(sy + 1) * width]) {
+            let Some(trow) = sy.checked_sub(kept.start).and_then(|r| tmp.get(r * width..(r + 1) * width))
+            else {
+                continue;
+            };
+            for (o, &s) in orow.iter_mut().zip(trow) {
                 *o += k * s;
             }
         }
     }
-    out
+    dst
 }
 
 impl Dac for Phosphor {
@@ -916,6 +1096,68 @@ mod tests {
     /// steps (`n + 1` samples, the first a spot).
     fn hline(y: u16, x0: u16, x1: u16, n: u16) -> Vec<Sample> {
         (0..=n).map(|k| on(x0 + ((u32::from(x1 - x0) * u32::from(k)) / u32::from(n)) as u16, y)).collect()
+    }
+
+    /// Bands of a picture drawn apart and stacked are the picture, byte for
+    /// byte: with and without glow, a frame and a faded second one over it,
+    /// lines, dwells, blanked jumps and samples off the screen's edge.
+    #[test]
+    fn bands_drawn_apart_are_the_picture() {
+        let mut frame = vec![on(0, 0), on(MAX, MAX), off(100, 3000), on(100, 3000), on(100, 3000)];
+        frame.extend(hline(2048, 10, 4000, 37));
+        let mut x = 12_345u32;
+        for _ in 0..300 {
+            x = x.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+            let s = Sample::new((x >> 8) as u16 % 4200, (x >> 18) as u16 % 4096, Beam::On);
+            frame.push(s);
+        }
+        let glows = [
+            Glow { strength: 0.0, radius: 1.0 },
+            Glow { strength: 0.04, radius: 2.0 },
+            Glow { strength: 0.3, radius: 7.5 },
+        ];
+        for glow in glows {
+            let cfg = PhosphorConfig { glow, ..PhosphorConfig::with_size(96, 80) };
+            let draw = |p: &mut Phosphor| {
+                p.deposit(frame.iter().copied());
+                p.decay();
+                p.deposit(frame.iter().rev().copied());
+                (p.to_rgb8(), p.to_rgba8())
+            };
+            let whole = draw(&mut screen(cfg.clone()));
+            for cuts in [vec![0, 80], vec![0, 40, 80], vec![0, 1, 2, 79, 80], vec![0, 13, 13, 50, 67, 80]] {
+                let (mut rgb, mut rgba) = (Vec::new(), Vec::new());
+                for w in cuts.windows(2) {
+                    let mut band = Phosphor::band(cfg.clone(), w[0]..w[1]).unwrap();
+                    assert_eq!(band.rows(), w[0]..w[1]);
+                    let (a, b) = draw(&mut band);
+                    assert_eq!(a.len(), 96 * 3 * (w[1] - w[0]));
+                    rgb.extend(a);
+                    rgba.extend(b);
+                }
+                assert!(rgb == whole.0, "glow {glow:?}, bands {cuts:?}: RGB differs");
+                assert!(rgba == whole.1, "glow {glow:?}, bands {cuts:?}: RGBA differs");
+            }
+        }
+        // A screen of bands on threads draws the same bytes and PNG.
+        let cfg = PhosphorConfig::with_size(96, 80);
+        for n in [1, 2, 3, 80, 1000] {
+            let mut bands = Screen::new(cfg.clone(), n).unwrap();
+            bands.deposit(&frame);
+            bands.decay();
+            bands.deposit(&frame);
+            let mut one = screen(cfg.clone());
+            one.deposit(frame.iter().copied());
+            one.decay();
+            one.deposit(frame.iter().copied());
+            assert!(bands.to_rgba8() == one.to_rgba8(), "{n} bands");
+            assert_eq!(bands.encode_png(), one.encode_png(), "{n} bands");
+        }
+        // Rows past the picture are clamped: an empty band draws nothing.
+        let mut past = Phosphor::band(small(), 70..90).unwrap();
+        assert_eq!(past.rows(), 64..64);
+        past.deposit(frame.iter().copied());
+        assert!(past.to_rgb8().is_empty());
     }
 
     /// The energy summed over pixel rows `rows`, columns `cols`.

@@ -580,14 +580,14 @@ pub fn auto_every(dims: crate::volume::Dims) -> usize {
 /// Refresh `screen` with the scene's frame `frames` times: each time the
 /// phosphor decays, then the frame's samples are deposited.
 pub fn refresh(
-    screen: &mut crate::phosphor::Phosphor,
+    screen: &mut crate::phosphor::Screen,
     scene: &Scene,
     frames: u32,
     progress: Option<&Progress>,
 ) {
     for _ in 0..frames.max(1) {
         screen.decay();
-        screen.deposit(scene.samples.iter().copied());
+        screen.deposit(&scene.samples);
         if let Some(p) = progress {
             p.inc();
         }
@@ -604,10 +604,18 @@ pub fn render(
     picture: crate::phosphor::PhosphorConfig,
     frames: u32,
     progress: Option<&crate::progress::Progress>,
-) -> Result<crate::phosphor::Phosphor> {
-    let mut screen = crate::phosphor::Phosphor::new(picture).context("invalid picture settings")?;
+) -> Result<crate::phosphor::Screen> {
+    let mut screen =
+        crate::phosphor::Screen::new(picture, draw_threads()).context("invalid picture settings")?;
     refresh(&mut screen, scene, frames, progress);
     Ok(screen)
+}
+
+/// Threads a picture is drawn on ([`crate::phosphor::Screen`]): the
+/// machine's cores, at most 8 (a band's glow margin is drawn by both its
+/// neighbours, so thinner bands gain less).
+pub fn draw_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get()).min(8)
 }
 
 #[cfg(test)]

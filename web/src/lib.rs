@@ -5,11 +5,11 @@
 //! readers ([`LoadedVolume::read_known_bytes`], gzip included), its frame
 //! is built by the one picture pipeline ([`scene::build`]: the board's
 //! engine in process, as `isoscope-sim render` builds it), and drawn by the
-//! same phosphor model ([`Phosphor`]). This crate holds the page's state
+//! same phosphor model ([`Screen`], one band: no threads in the page). This crate holds the page's state
 //! (the volume, the settings, the last frame and picture) and turns it into
 //! values JavaScript takes: RGBA pixels, the samples as text, and JSON.
 //! Its exports are the command line's files, made by the same functions:
-//! `render`'s PNG ([`Phosphor::encode_png`]), `render --samples`'s text
+//! `render`'s PNG ([`Screen::encode_png`]), `render --samples`'s text
 //! ([`scene::samples_text`]), `contour --format svg`'s SVG
 //! ([`isoscope_sim::svg::write_svg`]) and `wav`'s WAV
 //! ([`isoscope_sim::wav::write_wav`], with its defaults).
@@ -39,7 +39,7 @@ use isoscope_sim::fit::{self, FitOptions, Limits};
 use isoscope_sim::formats::Options;
 use isoscope_sim::info::{LEVEL_BINS, Summary, summarize};
 use isoscope_sim::link::{BoardInfo, SendConfig, SendProgress, Sender, State, ViewSetting, WireVolume};
-use isoscope_sim::phosphor::{Phosphor, PhosphorConfig};
+use isoscope_sim::phosphor::{PhosphorConfig, Screen};
 use isoscope_sim::progress::Progress;
 use isoscope_sim::scene::{self, Scene, SceneConfig};
 use isoscope_sim::volume::{DemoSpec, Dims, LoadedVolume};
@@ -101,7 +101,7 @@ pub struct Scope {
     /// Milliseconds the last frame took to build and draw.
     build_ms: f64,
     draw_ms: f64,
-    screen: Phosphor,
+    screen: Screen,
     /// The last frame's glow fades under the next instead of being
     /// cleared ([`Scope::set_persistence`]).
     persistence: bool,
@@ -400,7 +400,7 @@ impl Scope {
             bail!("the picture must be 1 to {MAX_SIZE} pixels a side, not {size}");
         }
         let screen =
-            Phosphor::new(PhosphorConfig::with_size(size, size)).context("invalid picture settings")?;
+            Screen::new(PhosphorConfig::with_size(size, size), 1).context("invalid picture settings")?;
         Ok(Self {
             volume: None,
             levels: Vec::new(),
@@ -903,7 +903,7 @@ mod tests {
         assert_ne!(a.samples, b.samples);
         // `render --animate`'s frames: the last one decays, the new one
         // is deposited over it.
-        let mut want = Phosphor::new(PhosphorConfig::with_size(64, 64)).unwrap();
+        let mut want = Screen::new(PhosphorConfig::with_size(64, 64), 1).unwrap();
         scene::refresh(&mut want, &a, 1, None);
         scene::refresh(&mut want, &b, 1, None);
         assert!(s.pixels() == want.to_rgba8(), "the turn over the last frame, faded");
