@@ -68,7 +68,7 @@ SCENES = [
 # A real volume, opened through the page's file input.
 FILE_SCENE = "brainsmall.den"
 # A large demo, picked from the page's list: seconds of work in the worker.
-LARGE_DEMO = "gyroid:192"
+LARGE_DEMO = "gyroid:256"
 # The longest the page's thread may go without running a 10 ms timer while
 # the large demo loads (about 2.4 s of work in the worker on this project's
 # machine; a page doing it on its own thread stalls that long).
