@@ -1,9 +1,10 @@
 // The page: controls around the wasm Scope (web/src/lib.rs), which reads
-// the volume, builds the frame through isoscope's one picture pipeline and
-// draws it on the simulated phosphor. The Scope lives in a worker
-// (worker.js), so that long work never holds up the page; this file only
-// moves values between the controls and the worker, pixels onto the
-// canvas, and the worker's exports into downloads.
+// the volume and builds the frame through isoscope's one picture pipeline,
+// and the wasm Painter, which draws it on the simulated phosphor. Each
+// lives in a worker (worker.js), so that long work never holds up the page
+// and a frame is drawn while the next is built; this file only moves
+// values between the controls and the workers, pixels onto the canvas, and
+// the workers' exports into downloads.
 //
 // URL parameters (all optional): demo=NAME:N, level=L[,L...], yaw, pitch,
 // zoom (0.1 to 1), axes=xy,xz,yz, every=N (0: auto), board=f407, spin=1,
@@ -28,6 +29,8 @@ let stats = null;
 let dirty = false;
 let building = false;
 let loading = false;
+// Frames handed to the painter and not yet on the canvas.
+let painting = 0;
 let spinning = false;
 
 // What a test (or the console) reads: whether the first picture is up,
@@ -47,48 +50,61 @@ const api = {
   stats: () => stats,
   info: () => info,
   view: () => ({ ...view }),
-  pending: () => dirty || building || loading,
+  pending: () => dirty || building || loading || painting > 0,
 };
 window.isoscope = api;
 // The picture as XY audio (audio.js).
 const audio = setupAudio(call, api);
 
-// The worker, and the requests it has not answered, oldest first.
+// Two workers on the same module (worker.js): the scope, which reads the
+// volume and builds each frame, and the painter, which draws the frames
+// the scope built, so that the next frame is built while the last one is
+// drawn. The requests neither has answered, oldest first.
 const worker = new Worker(new URL('./worker.js', import.meta.url), { type: 'module' });
+const painter = new Worker(new URL('./worker.js', import.meta.url), { type: 'module' });
 const waiting = new Map();
 let nextId = 0;
 let progress = null;
 
-// Ask the worker to do `op`; a promise of its answer.
-function call(op, args = {}, transfer = []) {
+// Ask `to` (the scope's worker unless said) to do `op`; a promise of its
+// answer.
+function ask(to, op, args = {}, transfer = []) {
   const id = ++nextId;
   return new Promise((resolve, reject) => {
     waiting.set(id, { resolve, reject, start: performance.now() });
-    worker.postMessage({ id, op, ...args }, transfer);
+    to.postMessage({ id, op, ...args }, transfer);
   });
 }
+// (Declarations, not constants: `setupAudio` above is handed `call`.)
+function call(op, args, transfer) {
+  return ask(worker, op, args, transfer);
+}
+function paint(op, args, transfer) {
+  return ask(painter, op, args, transfer);
+}
 
-worker.onmessage = (e) => {
-  const m = e.data;
-  if (m.progress) {
-    progress = m.progress;
-    return;
-  }
-  const w = waiting.get(m.id);
-  if (!w) return;
-  waiting.delete(m.id);
-  if (progress && progress.id === m.id) progress = null;
-  if (m.ok) w.resolve(m.value);
-  else w.reject(new Error(m.error));
-};
-
-worker.onerror = (e) => {
-  e.preventDefault();
-  const err = new Error(`the page's worker failed: ${e.message || 'it could not start'}`);
-  for (const w of waiting.values()) w.reject(err);
-  waiting.clear();
-  showError(err);
-};
+for (const [w, name] of [[worker, 'worker'], [painter, 'painter']]) {
+  w.onmessage = (e) => {
+    const m = e.data;
+    if (m.progress) {
+      progress = m.progress;
+      return;
+    }
+    const r = waiting.get(m.id);
+    if (!r) return;
+    waiting.delete(m.id);
+    if (progress && progress.id === m.id) progress = null;
+    if (m.ok) r.resolve(m.value);
+    else r.reject(new Error(m.error));
+  };
+  w.onerror = (e) => {
+    e.preventDefault();
+    const err = new Error(`the page's ${name} failed: ${e.message || 'it could not start'}`);
+    for (const r of waiting.values()) r.reject(err);
+    waiting.clear();
+    showError(err);
+  };
+}
 
 // The oldest request's progress, once it has run BUSY_AFTER_MS.
 function showBusy(now) {
@@ -167,26 +183,18 @@ function spin(t) {
 
 // Ask for the frame if anything changed, one frame at a time: changes made
 // while one is built go into the next, which is asked for as soon as this
-// one is on the screen (not at the next animation frame).
+// one is built (not at the next animation frame) while the painter draws
+// this one; at most two frames wait for the painter.
 async function redraw() {
-  if (!dirty || building || loading) return;
+  if (!dirty || building || loading || painting > 1) return;
   dirty = false;
   building = true;
   const t0 = performance.now();
   try {
     const frame = await call('frame', { settings: settings() });
-    if (frame) {
-      const rgba = new Uint8ClampedArray(frame.pixels.buffer);
-      $('screen').getContext('2d').putImageData(new ImageData(rgba, frame.size, frame.size), 0, 0);
-      stats = { ...JSON.parse(frame.stats), pixels_ms: frame.pixelsMs };
-      api.frameMs = performance.now() - t0;
-      api.frames += 1;
-      audio.update();
-      showStats();
-      if (api.onframe) api.onframe(stats, api.frameMs);
-    }
+    if (frame) show(frame, t0);
+    else if (painting === 0) api.ready = true;
     clearError();
-    api.ready = true;
   } catch (e) {
     showError(e);
   } finally {
@@ -195,6 +203,29 @@ async function redraw() {
   spin(performance.now());
   // (A hidden page waits for the animation frames, which stop.)
   if (dirty && !document.hidden) redraw();
+}
+
+// Hand a built frame to the painter; its picture onto the canvas when
+// drawn (frames are drawn in the order built).
+function show(frame, t0) {
+  painting += 1;
+  paint('paint', { samples: frame.samples, clear: frame.clear }, [frame.samples.buffer])
+    .then((p) => {
+      const rgba = new Uint8ClampedArray(p.pixels.buffer);
+      $('screen').getContext('2d').putImageData(new ImageData(rgba, p.size, p.size), 0, 0);
+      stats = { ...JSON.parse(frame.stats), draw_ms: p.drawMs, pixels_ms: p.pixelsMs };
+      api.frameMs = performance.now() - t0;
+      api.frames += 1;
+      api.ready = true;
+      audio.update();
+      showStats();
+      if (api.onframe) api.onframe(stats, api.frameMs);
+    })
+    .catch(showError)
+    .finally(() => {
+      painting -= 1;
+      if (dirty && !document.hidden) redraw();
+    });
 }
 
 const fmt = (n) => Number(n).toLocaleString('en');
@@ -314,7 +345,8 @@ function baseName() {
 async function exportFile(kind) {
   const [type, ext] = EXPORTS[kind];
   try {
-    const data = await call('export', { kind });
+    // The picture is the painter's; the rest the scope's.
+    const data = kind === 'png' ? await paint('png') : await call('export', { kind });
     const url = URL.createObjectURL(new Blob([data], { type }));
     const a = Object.assign(document.createElement('a'), { href: url, download: baseName() + ext });
     document.body.append(a);
@@ -402,7 +434,7 @@ async function main() {
   $('screen').width = size;
   $('screen').height = size;
   requestAnimationFrame(tick);
-  await call('init', { size });
+  await Promise.all([call('init', { size, paints: false }), paint('paintInit', { size })]);
   view.yaw = param('yaw', view.yaw);
   view.pitch = param('pitch', view.pitch);
   view.zoom = param('zoom', view.zoom);

@@ -1,16 +1,21 @@
-// The page's worker: the wasm Scope (web/src/lib.rs) off the page's
+// The page's workers: the wasm Scope (web/src/lib.rs) off the page's
 // thread, so that reading a volume and building a frame, which can take
-// seconds, never hold up the page. app.js sends it requests, one at a time
+// seconds, never hold up the page; and in a second worker on this module,
+// the Painter that draws the frames the Scope built (app.js), while the
+// Scope builds the next. app.js sends each requests, one at a time
 // in the order sent: { id, op, ...arguments }; it answers each with
 // { id, ok: true, value } or { id, ok: false, error }, and while one runs
 // sends { progress: { id, label, done, total } } (total 0: a step with no
 // count) when the step changes and at most every PROGRESS_MS otherwise.
 
-import init, { Link, Scope } from './isoscope_web.js';
+import init, { Link, Painter, Scope } from './isoscope_web.js';
 
 const PROGRESS_MS = 100;
 
 let scope = null;
+// The picture, in the page's painter worker: it draws the frames another
+// worker's Scope built (app.js).
+let painter = null;
 // The board over Web Serial (web/serial.js moves the port's bytes): the
 // command line's sender, on this worker's clock.
 let link = null;
@@ -32,10 +37,29 @@ const answer = (value, transfer = []) => ({ value, transfer });
 const bytes = (u8) => answer(u8, [u8.buffer]);
 
 const ops = {
-  async init({ size }) {
+  // A Scope; with `paints` false it only builds, for a painter.
+  async init({ size, paints = true }) {
     await init();
     scope = new Scope(size);
+    scope.set_drawing(paints);
     return answer(null);
+  },
+  async paintInit({ size }) {
+    await init();
+    painter = new Painter(size);
+    return answer(null);
+  },
+  // Draw a frame's samples (x, y, beam a sample) on a dark screen or over
+  // the last one: its pixels.
+  paint({ samples, clear }) {
+    painter.paint(samples, clear);
+    const t0 = performance.now();
+    const pixels = painter.pixels();
+    const pixelsMs = performance.now() - t0;
+    return answer({ size: painter.size(), pixels, drawMs: painter.draw_ms(), pixelsMs }, [pixels.buffer]);
+  },
+  png() {
+    return bytes(painter.png());
   },
   demo({ spec }) {
     scope.load_demo(spec);
@@ -47,15 +71,14 @@ const ops = {
     scope.load_file(file.name, data);
     return answer(scope.info());
   },
-  // Apply the page's settings; build and draw the frame if they changed
-  // (null if not).
+  // Apply the page's settings; build the frame if they changed (null if
+  // not): its samples for the painter, and whether it is drawn on a dark
+  // screen.
   frame({ settings: s }) {
     apply(s);
     if (!scope.update()) return answer(null);
-    const t0 = performance.now();
-    const pixels = scope.pixels();
-    const pixelsMs = performance.now() - t0;
-    return answer({ size: scope.size(), pixels, pixelsMs, stats: scope.stats() }, [pixels.buffer]);
+    const samples = scope.frame_samples();
+    return answer({ samples, clear: scope.clears(), stats: scope.stats() }, [samples.buffer]);
   },
   // The board link: greet a board (a new link), move the port's bytes and
   // the time through it (`bytes` read, or `closed`), send the page's
@@ -138,7 +161,9 @@ function message(e) {
 async function run(req) {
   job = { id: req.id, label: null, posted: 0 };
   try {
-    if (!scope && req.op !== 'init') throw new Error('the worker has no Scope yet');
+    if (!scope && !painter && req.op !== 'init' && req.op !== 'paintInit') {
+      throw new Error('the worker has no Scope or Painter yet');
+    }
     const op = ops[req.op];
     if (!op) throw new Error(`the worker has no request ${req.op}`);
     const { value, transfer } = await op(req);

@@ -220,8 +220,7 @@ pub fn animate_board<W: Write>(
         frame.extend(board.engine().frame());
         let t1 = Instant::now();
         for _ in 0..anim.refreshes {
-            screen.decay();
-            screen.deposit(&frame);
+            screen.refresh(&frame);
             if k >= 0 {
                 samples += frame.len() as u64;
             }

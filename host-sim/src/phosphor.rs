@@ -842,6 +842,13 @@ impl Screen {
         self.bands.iter_mut().for_each(|p| p.decay());
     }
 
+    /// One refresh of a frame: the phosphor fades ([`Screen::decay`]),
+    /// then `samples` are deposited ([`Screen::deposit`]).
+    pub fn refresh(&mut self, samples: &[Sample]) {
+        self.decay();
+        self.deposit(samples);
+    }
+
     /// [`Phosphor::deposit`] of `samples`, every band on a thread.
     pub fn deposit(&mut self, samples: &[Sample]) {
         self.each(|p| p.deposit(samples.iter().copied()));

@@ -586,8 +586,7 @@ pub fn refresh(
     progress: Option<&Progress>,
 ) {
     for _ in 0..frames.max(1) {
-        screen.decay();
-        screen.deposit(&scene.samples);
+        screen.refresh(&scene.samples);
         if let Some(p) = progress {
             p.inc();
         }

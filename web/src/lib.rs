@@ -33,6 +33,7 @@ use anyhow::{Context, Result, bail};
 use isoscope_core::beam::BeamConfig;
 use isoscope_core::contour::grid::Plane;
 use isoscope_core::engine::Board;
+use isoscope_core::output::{Beam, Sample};
 use isoscope_core::view::View;
 use isoscope_sim::board::frames_for;
 use isoscope_sim::fit::{self, FitOptions, Limits};
@@ -102,6 +103,8 @@ pub struct Scope {
     build_ms: f64,
     draw_ms: f64,
     screen: Screen,
+    /// Whether a frame is drawn on `screen` ([`Scope::set_drawing`]).
+    drawing: bool,
     /// The last frame's glow fades under the next instead of being
     /// cleared ([`Scope::set_persistence`]).
     persistence: bool,
@@ -253,6 +256,29 @@ impl Scope {
             self.scene = None;
         }
         self.persistence = on;
+    }
+
+    /// Draw each frame on the scope's own screen (the default), or only
+    /// build it, for a [`Painter`] to draw from [`Scope::frame_samples`]
+    /// (the page's second worker: the next frame is built while the last
+    /// is drawn). Not drawing, [`Scope::pixels`] stays dark and
+    /// [`Scope::png`] is the painter's.
+    pub fn set_drawing(&mut self, on: bool) {
+        self.drawing = on;
+    }
+
+    /// The frame's samples for a [`Painter`]: `x, y, beam` (1 lit, 0
+    /// blanked) a sample (empty before the first frame).
+    pub fn frame_samples(&self) -> Vec<u16> {
+        self.scene.as_ref().map_or_else(Vec::new, |s| {
+            s.samples.iter().flat_map(|p| [p.x, p.y, u16::from(p.beam == Beam::On)]).collect()
+        })
+    }
+
+    /// Whether each frame is drawn on a dark screen: persistence off
+    /// (see [`Scope::set_persistence`]); a [`Painter`] is told so.
+    pub fn clears(&self) -> bool {
+        !self.persistence
     }
 
     /// Build the frame and draw it if the settings changed; whether they
@@ -416,6 +442,7 @@ impl Scope {
             build_ms: 0.0,
             draw_ms: 0.0,
             screen,
+            drawing: true,
             persistence: false,
             audio_step: 0.0,
         })
@@ -620,6 +647,9 @@ impl Scope {
 
     fn png_bytes(&self) -> Result<Vec<u8>> {
         self.shown()?;
+        if !self.drawing {
+            bail!("this scope does not draw its frames: its painter has the picture");
+        }
         Ok(self.screen.encode_png())
     }
 
@@ -663,14 +693,98 @@ impl Scope {
         report("drawing the picture", 0, 0);
         // A frame on a dark screen, as `render` draws it (one refresh), or
         // over the last one, faded, as `render --animate` draws its frames.
-        if !self.persistence {
-            self.screen.clear();
+        if self.drawing {
+            if !self.persistence {
+                self.screen.clear();
+            }
+            scene::refresh(&mut self.screen, &built, 1, None);
         }
-        scene::refresh(&mut self.screen, &built, 1, None);
         self.build_ms = (t1 - t0).as_secs_f64() * 1e3;
         self.draw_ms = t1.elapsed().as_secs_f64() * 1e3;
         self.fit = Some((self.fit_key(), built.capacity.points));
         self.scene = Some(built);
+        Ok(())
+    }
+}
+
+/// The picture drawn in a worker of its own: a [`Scope`] that only builds
+/// (`set_drawing(false)`) hands each frame's samples
+/// ([`Scope::frame_samples`]) to a painter, which draws them as the scope
+/// would have (the same [`Screen`], one band: `render`'s bytes), while
+/// the scope builds the next frame.
+#[wasm_bindgen]
+pub struct Painter {
+    screen: Screen,
+    draw_ms: f64,
+}
+
+#[wasm_bindgen]
+impl Painter {
+    /// A painter of a `size` by `size` picture, dark.
+    ///
+    /// # Errors
+    /// A size of 0 or above 2048.
+    #[wasm_bindgen(constructor)]
+    pub fn new(size: u32) -> Result<Painter, JsError> {
+        Self::with_size(size).map_err(js)
+    }
+
+    /// Draw a frame of `samples` (`x, y, beam` a sample, as
+    /// [`Scope::frame_samples`] gives them): on a dark screen if `clear`,
+    /// else over the last frame, faded.
+    ///
+    /// # Errors
+    /// A sample list whose length is not a multiple of 3.
+    pub fn paint(&mut self, samples: &[u16], clear: bool) -> Result<(), JsError> {
+        self.draw(samples, clear).map_err(js)
+    }
+
+    /// The picture: `size * size` RGBA pixels, row by row from the top.
+    pub fn pixels(&self) -> Vec<u8> {
+        self.screen.to_rgba8()
+    }
+
+    /// The picture as `render` writes it: an 8-bit RGB PNG file.
+    pub fn png(&self) -> Vec<u8> {
+        self.screen.encode_png()
+    }
+
+    /// The picture's width and height in pixels.
+    pub fn size(&self) -> u32 {
+        self.screen.config().width
+    }
+
+    /// Milliseconds the last [`Painter::paint`] took.
+    pub fn draw_ms(&self) -> f64 {
+        self.draw_ms
+    }
+}
+
+impl Painter {
+    fn with_size(size: u32) -> Result<Self> {
+        if !(1..=MAX_SIZE).contains(&size) {
+            bail!("the picture must be 1 to {MAX_SIZE} pixels a side, not {size}");
+        }
+        let screen =
+            Screen::new(PhosphorConfig::with_size(size, size), 1).context("invalid picture settings")?;
+        Ok(Self { screen, draw_ms: 0.0 })
+    }
+
+    fn draw(&mut self, samples: &[u16], clear: bool) -> Result<()> {
+        let t0 = web_time::Instant::now();
+        let (triples, rest) = samples.as_chunks::<3>();
+        if !rest.is_empty() {
+            bail!("a frame's samples come in threes (x, y, beam), not {} numbers", samples.len());
+        }
+        let frame: Vec<Sample> = triples
+            .iter()
+            .map(|&[x, y, b]| Sample::new(x, y, if b == 0 { Beam::Off } else { Beam::On }))
+            .collect();
+        if clear {
+            self.screen.clear();
+        }
+        self.screen.refresh(&frame);
+        self.draw_ms = t0.elapsed().as_secs_f64() * 1e3;
         Ok(())
     }
 }
@@ -912,6 +1026,39 @@ mod tests {
         assert!(s.update().unwrap());
         let alone = scene::render(&b, PhosphorConfig::with_size(64, 64), 1, None).unwrap();
         assert!(s.pixels() == alone.to_rgba8() && alone.to_rgba8() != want.to_rgba8());
+    }
+
+    #[test]
+    fn a_painter_draws_what_the_scope_draws() {
+        // A scope that only builds, and a painter given its samples, against
+        // a scope that draws: the same pixels and PNG, frame after frame,
+        // persistence on (a turn over the last frame) and off.
+        let mut drawing = Scope::with_size(64).unwrap();
+        let mut building = Scope::with_size(64).unwrap();
+        building.set_drawing(false);
+        let mut painter = Painter::with_size(64).unwrap();
+        for s in [&mut drawing, &mut building] {
+            s.demo("torus:12").unwrap();
+        }
+        for (yaw, persistence) in [(30.0, false), (60.0, true), (90.0, true), (120.0, false)] {
+            for s in [&mut drawing, &mut building] {
+                s.set_view(yaw, 20.0, DEFAULT_ZOOM);
+                s.set_persistence(persistence);
+                assert!(s.update().unwrap());
+            }
+            let samples = building.frame_samples();
+            assert_eq!(samples.len(), 3 * drawing.scene.as_ref().unwrap().samples.len());
+            painter.draw(&samples, building.clears()).unwrap();
+            assert!(painter.pixels() == drawing.pixels(), "yaw {yaw}, persistence {persistence}");
+            assert_eq!(painter.png(), drawing.png_bytes().unwrap());
+        }
+        assert!(
+            building.pixels() == Scope::with_size(64).unwrap().pixels(),
+            "a scope that only builds stays dark"
+        );
+        assert!(building.png_bytes().is_err(), "a scope that does not draw has no PNG of its own");
+        assert!(painter.draw(&[1, 2], true).is_err(), "samples come in threes");
+        assert!(Painter::with_size(0).is_err());
     }
 
     #[test]
