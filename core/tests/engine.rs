@@ -185,16 +185,20 @@ impl Host {
     }
 
     fn begin(&mut self, v: &Vol) -> Vec<u8> {
-        let seq = self.next();
-        frame(&Message::BeginVolume {
-            seq,
+        frame(&self.begin_message(v))
+    }
+
+    /// The `BeginVolume` of `v`, with this host's next sequence number.
+    fn begin_message(&mut self, v: &Vol) -> Message<'static> {
+        Message::BeginVolume {
+            seq: self.next(),
             dims: v.dims,
             sample_type: v.ty,
             spacing: [1.0; 3],
             levels: Levels::from_slice(&v.levels).unwrap(),
             axes: v.axes,
             every: v.every,
-        })
+        }
     }
 
     /// Every chunk of every slice, `chunk` bytes at most, one frame each.
@@ -926,32 +930,20 @@ fn outgrowing() -> [(Demo, usize, Vol); 3] {
 
 /// The messages of [`Host::volume`] (chunks of [`MAX_CHUNK`]), whole.
 fn volume_messages(v: &Vol) -> Vec<Message<'_>> {
-    let mut seq = 100u16;
-    let mut next = || {
-        seq = seq.wrapping_add(1);
-        seq
-    };
-    let mut out = vec![Message::Hello { protocol: PROTOCOL_VERSION, firmware: [0, 0, 0], seq: 101 }];
-    out.push(Message::BeginVolume {
-        seq: next(),
-        dims: v.dims,
-        sample_type: v.ty,
-        spacing: [1.0; 3],
-        levels: Levels::from_slice(&v.levels).unwrap(),
-        axes: v.axes,
-        every: v.every,
-    });
+    let mut host = Host::new();
+    let mut out = vec![Message::Hello { protocol: PROTOCOL_VERSION, firmware: [0, 0, 0], seq: host.seq + 1 }];
+    out.push(host.begin_message(v));
     for (z, slice) in v.bytes.chunks(v.slice_bytes()).enumerate() {
         for (k, data) in slice.chunks(MAX_CHUNK).enumerate() {
             out.push(Message::SliceData {
-                seq: next(),
+                seq: host.next(),
                 slice: z as u16,
                 offset: (k * MAX_CHUNK) as u32,
                 data,
             });
         }
     }
-    out.push(Message::EndVolume { seq: next() });
+    out.push(Message::EndVolume { seq: host.next() });
     out
 }
 
