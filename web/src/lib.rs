@@ -420,13 +420,18 @@ impl Scope {
     }
 }
 
+/// A dark `size` by `size` screen of one band, as the page draws it (a
+/// scope's own, or a painter's).
+fn page_screen(size: u32) -> Result<Screen> {
+    if !(1..=MAX_SIZE).contains(&size) {
+        bail!("the picture must be 1 to {MAX_SIZE} pixels a side, not {size}");
+    }
+    Screen::new(PhosphorConfig::with_size(size, size), 1).context("invalid picture settings")
+}
+
 impl Scope {
     fn with_size(size: u32) -> Result<Self> {
-        if !(1..=MAX_SIZE).contains(&size) {
-            bail!("the picture must be 1 to {MAX_SIZE} pixels a side, not {size}");
-        }
-        let screen =
-            Screen::new(PhosphorConfig::with_size(size, size), 1).context("invalid picture settings")?;
+        let screen = page_screen(size)?;
         Ok(Self {
             volume: None,
             levels: Vec::new(),
@@ -762,12 +767,7 @@ impl Painter {
 
 impl Painter {
     fn with_size(size: u32) -> Result<Self> {
-        if !(1..=MAX_SIZE).contains(&size) {
-            bail!("the picture must be 1 to {MAX_SIZE} pixels a side, not {size}");
-        }
-        let screen =
-            Screen::new(PhosphorConfig::with_size(size, size), 1).context("invalid picture settings")?;
-        Ok(Self { screen, draw_ms: 0.0 })
+        Ok(Self { screen: page_screen(size)?, draw_ms: 0.0 })
     }
 
     fn draw(&mut self, samples: &[u16], clear: bool) -> Result<()> {
