@@ -32,6 +32,8 @@ let loading = false;
 // Frames handed to the painter and not yet on the canvas.
 let painting = 0;
 let spinning = false;
+// The mouse turns the view (a drag on the picture).
+let dragging = false;
 
 // What a test (or the console) reads: whether the first picture is up,
 // the last error, the frame's samples as `render --samples` writes them (a
@@ -167,6 +169,9 @@ function settings() {
     every: Number.parseInt($('every').value, 10) || 0,
     board: $('board').checked ? 'f407' : '',
     persistence: $('persistence').checked,
+    // While the view turns, frames turn the board's picture (SetView);
+    // when it stops, the still is built again exactly (Scope.set_turning).
+    turning: spinning || dragging,
   };
 }
 
@@ -364,6 +369,7 @@ function wireControls() {
   let drag = null;
   canvas.addEventListener('pointerdown', (e) => {
     drag = { x: e.clientX, y: e.clientY };
+    dragging = true;
     canvas.setPointerCapture(e.pointerId);
   });
   canvas.addEventListener('pointermove', (e) => {
@@ -375,6 +381,8 @@ function wireControls() {
   });
   canvas.addEventListener('pointerup', () => {
     drag = null;
+    dragging = false;
+    changed();
   });
   canvas.addEventListener(
     'wheel',
@@ -412,6 +420,7 @@ function wireControls() {
   }
   $('spin').addEventListener('change', (e) => {
     spinning = e.target.checked;
+    changed();
   });
   $('reset').addEventListener('click', () => {
     Object.assign(view, DEFAULT_VIEW);

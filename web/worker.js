@@ -133,6 +133,7 @@ const ops = {
 };
 
 function apply(s) {
+  scope.set_turning(Boolean(s.turning));
   scope.set_levels(Float32Array.from(s.levels));
   scope.set_view(s.yaw, s.pitch, s.zoom);
   scope.set_planes(s.planes);

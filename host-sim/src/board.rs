@@ -16,6 +16,8 @@ use anyhow::{Context, Result, bail};
 use isoscope_core::engine::{Buffers, Capacity, Engine, EngineConfig, Event, Geometry};
 use isoscope_core::view::View;
 use isoscope_core::wire::{Levels, MAX_LEVELS, Message, NackCode, PROTOCOL_VERSION};
+use std::mem::ManuallyDrop;
+use std::ptr::NonNull;
 
 /// The engine's memory on the heap.
 #[derive(Debug, Clone)]
@@ -40,6 +42,63 @@ impl HostBuffers {
     /// The buffers, lent to an engine.
     pub fn buffers(&mut self) -> Buffers<'_> {
         Buffers::halves(&mut self.slices, &mut self.rows, &mut self.surfaces, &mut self.scratch)
+    }
+}
+
+/// A board in process that owns its memory ([`HostBuffers`]), so that it
+/// can be kept between calls: the web page turns one with `SetView` while
+/// its view spins, as the board itself does. [`OwnedBoard::with`] lends the
+/// board out.
+#[derive(Debug)]
+pub struct OwnedBoard {
+    /// The board, borrowing `*mem` until it is dropped (first, in `Drop`).
+    board: ManuallyDrop<InProcess<'static>>,
+    /// The board's memory: a leaked `Box`, freed in `Drop` after the board.
+    mem: NonNull<HostBuffers>,
+}
+
+impl OwnedBoard {
+    /// A board of `capacity` with `cfg`, greeted, showing nothing
+    /// ([`InProcess::new`]).
+    ///
+    /// # Errors
+    /// As [`InProcess::new`].
+    pub fn new(capacity: &Capacity, cfg: EngineConfig) -> Result<Self> {
+        let mem = NonNull::from(Box::leak(Box::new(HostBuffers::new(capacity))));
+        // SAFETY: `mem` is a live allocation that nothing else reaches; the
+        // board's borrow of it ends when the board is dropped, which `Drop`
+        // does before freeing it (and the error path below, the board not
+        // made). `with` lends the board only for a lifetime its caller
+        // cannot name, so no board outlives `self` or changes places.
+        match InProcess::new(unsafe { &mut *mem.as_ptr() }, cfg) {
+            Ok(board) => Ok(Self { board: ManuallyDrop::new(board), mem }),
+            Err(e) => {
+                // SAFETY: from `Box::leak` above; no borrow of it is left.
+                drop(unsafe { Box::from_raw(mem.as_ptr()) });
+                Err(e)
+            }
+        }
+    }
+
+    /// `f` of the board.
+    pub fn with<R>(&mut self, f: impl for<'b> FnOnce(&mut InProcess<'b>) -> R) -> R {
+        f(&mut self.board)
+    }
+
+    /// The board, to read.
+    pub fn board(&self) -> &InProcess<'_> {
+        &self.board
+    }
+}
+
+impl Drop for OwnedBoard {
+    fn drop(&mut self) {
+        // SAFETY: the board is dropped once, here, before the memory it
+        // borrows is freed; the memory came from `Box::leak` in `new`.
+        unsafe {
+            ManuallyDrop::drop(&mut self.board);
+            drop(Box::from_raw(self.mem.as_ptr()));
+        }
     }
 }
 

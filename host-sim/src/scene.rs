@@ -10,7 +10,7 @@
 //! [`Memory::Host`] it gets room for the whole surface (it grows until the
 //! surface fits): the same code, more memory.
 
-use crate::board::{HostBuffers, InProcess, Loaded, Refused, check_levels, host_capacity};
+use crate::board::{InProcess, Loaded, OwnedBoard, Refused, check_levels, host_capacity};
 use crate::link::{SendConfig, WireVolume};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
@@ -238,16 +238,30 @@ pub fn with_board_from<R>(
     progress: Option<&Progress>,
     f: impl FnOnce(&mut InProcess<'_>, Capacity) -> Result<R>,
 ) -> Result<R> {
+    let (mut board, capacity) = board_from(vol, cfg, points, progress)?;
+    board.with(|board| f(board, capacity))
+}
+
+/// The board [`with_board_from`] hands its function, to keep, and its
+/// memory's size.
+///
+/// # Errors
+/// As [`with_board`], but for `f`'s.
+pub fn board_from(
+    vol: &WireVolume,
+    cfg: &SceneConfig,
+    points: usize,
+    progress: Option<&Progress>,
+) -> Result<(OwnedBoard, Capacity)> {
     let send = cfg.send()?;
     cfg.beam.validate().context("invalid beam settings")?;
     let mut capacity = first_capacity(vol, cfg.memory, points);
     loop {
-        let mut mem = HostBuffers::new(&capacity);
-        let mut board = InProcess::new(&mut mem, cfg.engine())?;
+        let mut board = OwnedBoard::new(&capacity, cfg.engine())?;
         // A memory that can grow gives up on a surface as soon as it has
         // outgrown it: the picture is the larger memory's either way.
         let can_grow = cfg.memory == Memory::Host && capacity.points < HOST_MAX_POINTS;
-        let whole = match board.load_or_give_up(vol, &send, progress, can_grow) {
+        let whole = match board.with(|b| b.load_or_give_up(vol, &send, progress, can_grow)) {
             Ok(loaded) => loaded.is_some_and(|l| l.whole()),
             Err(e) if e.downcast_ref::<Refused>() == Some(&Refused(NackCode::DimsOverCapacity)) => bail!(
                 "a {}x{} slice of {:?} is {} bytes; {} holds {} (send a smaller or resampled volume)",
@@ -271,7 +285,7 @@ pub fn with_board_from<R>(
             }
             continue;
         }
-        return f(&mut board, capacity);
+        return Ok((board, capacity));
     }
 }
 

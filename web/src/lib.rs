@@ -33,9 +33,10 @@ use anyhow::{Context, Result, bail};
 use isoscope_core::beam::BeamConfig;
 use isoscope_core::contour::grid::Plane;
 use isoscope_core::engine::Board;
+use isoscope_core::engine::Capacity;
 use isoscope_core::output::{Beam, Sample};
 use isoscope_core::view::View;
-use isoscope_sim::board::frames_for;
+use isoscope_sim::board::{OwnedBoard, frames_for};
 use isoscope_sim::fit::{self, FitOptions, Limits};
 use isoscope_sim::formats::Options;
 use isoscope_sim::info::{LEVEL_BINS, Summary, summarize};
@@ -105,11 +106,34 @@ pub struct Scope {
     screen: Screen,
     /// Whether a frame is drawn on `screen` ([`Scope::set_drawing`]).
     drawing: bool,
+    /// Whether the view is turning ([`Scope::set_turning`]).
+    turning: bool,
+    /// While turning, the board the frames are turned on.
+    turn: Option<Turn>,
     /// The last frame's glow fades under the next instead of being
     /// cleared ([`Scope::set_persistence`]).
     persistence: bool,
     /// The spacing of the last [`Scope::audio`] frame.
     audio_step: f32,
+}
+
+/// A board kept between the frames of a turn ([`Scope::set_turning`]):
+/// loaded once, then turned with `SetView` as the board turns its picture,
+/// for the settings it was loaded with (every one but yaw and pitch).
+struct Turn {
+    board: OwnedBoard,
+    capacity: Capacity,
+    fit: Fit,
+    zoom: f64,
+}
+
+impl Turn {
+    /// The frame of `cfg`, the board turned to its view.
+    fn turned(&mut self, wire: &WireVolume, cfg: &SceneConfig) -> Result<Scene> {
+        report("turning the picture", 0, 0);
+        self.board.with(|b| b.set_view(&cfg.view))?;
+        Ok(scene::scene_of(self.board.board(), wire, self.capacity, cfg))
+    }
 }
 
 /// What decides whether a surface fits a memory: every setting but the
@@ -265,6 +289,22 @@ impl Scope {
     /// [`Scope::png`] is the painter's.
     pub fn set_drawing(&mut self, on: bool) {
         self.drawing = on;
+    }
+
+    /// Whether the view is turning (spinning, or dragged with the mouse).
+    /// While it is, a frame that differs from the last only in its yaw and
+    /// pitch is the board's picture turned with `SetView` (as `render
+    /// --animate` turns it, and the board turns its own): the volume is
+    /// loaded once for the turn, not for every frame. Those frames are not
+    /// `render --yaw`'s, whose order pass sees the volume from the new side
+    /// from the start; when the turn stops the frame is built again, and is.
+    pub fn set_turning(&mut self, on: bool) {
+        if on != self.turning {
+            self.turning = on;
+            if !on && self.turn.take().is_some() {
+                self.scene = None;
+            }
+        }
     }
 
     /// The frame's samples for a [`Painter`]: `x, y, beam` (1 lit, 0
@@ -448,6 +488,8 @@ impl Scope {
             draw_ms: 0.0,
             screen,
             drawing: true,
+            turning: false,
+            turn: None,
             persistence: false,
             audio_step: 0.0,
         })
@@ -510,6 +552,7 @@ impl Scope {
         self.scene = None;
         self.fit = None;
         self.fitted = None;
+        self.turn = None;
         Ok(())
     }
 
@@ -581,15 +624,16 @@ impl Scope {
     /// last frame needed if only the view changed since
     /// ([`scene::with_board_from`]: the same frame, without contouring the
     /// surface again at the sizes that did not fit).
-    fn build(&self, wire: &WireVolume, cfg: &SceneConfig) -> Result<Scene> {
+    fn build(&self, wire: &WireVolume, cfg: &SceneConfig) -> Result<(Scene, Option<Turn>)> {
         let points = match &self.fit {
             Some((fit, points)) if *fit == self.fit_key() => *points,
             _ => scene::HOST_START_POINTS,
         };
         let progress = Progress::with_hook("contouring", frames_for(wire, &cfg.send()?), report_feeding);
-        scene::with_board_from(wire, cfg, points, Some(&progress), |board, capacity| {
-            Ok(scene::scene_of(board, wire, capacity, cfg))
-        })
+        let (board, capacity) = scene::board_from(wire, cfg, points, Some(&progress))?;
+        let built = scene::scene_of(board.board(), wire, capacity, cfg);
+        let turn = self.turning.then(|| Turn { board, capacity, fit: self.fit_key(), zoom: self.zoom });
+        Ok((built, turn))
     }
 
     /// [`Scope::send_to`].
@@ -691,9 +735,18 @@ impl Scope {
     fn redraw(&mut self) -> Result<()> {
         let t0 = web_time::Instant::now();
         self.board_volume()?;
+        let mut turn = self.turn.take().filter(|t| (&t.fit, t.zoom) == (&self.fit_key(), self.zoom));
         let wire = self.wire()?;
         let cfg = self.config(wire);
-        let built = self.build(wire, &cfg)?;
+        let built = match &mut turn {
+            Some(t) => t.turned(wire, &cfg)?,
+            None => {
+                let (built, board) = self.build(wire, &cfg)?;
+                turn = board;
+                built
+            }
+        };
+        self.turn = turn;
         let t1 = web_time::Instant::now();
         report("drawing the picture", 0, 0);
         // A frame on a dark screen, as `render` draws it (one refresh), or
@@ -1105,6 +1158,48 @@ mod tests {
         // Another level starts again from the host's first size.
         s.set_levels(vec![0.5]);
         assert_ne!(s.fit.as_ref().unwrap().0, s.fit_key());
+    }
+
+    /// While the view turns, a frame is the board's picture turned with
+    /// `SetView` (the board loaded once, at the turn's first view), as
+    /// `render --animate` turns it; when the turn stops, the still is
+    /// `render`'s again. A change of level during a turn loads anew.
+    #[test]
+    fn a_turning_view_turns_the_boards_picture_and_stops_on_renders() {
+        let mut s = Scope::with_size(64).unwrap();
+        s.demo("torus:24").unwrap();
+        s.set_turning(true);
+        s.redraw().unwrap();
+        let vol = s.wire().unwrap().clone();
+        let first = s.config(&vol);
+        assert_eq!(s.scene.as_ref().unwrap().samples, scene::build(&vol, &first).unwrap().samples);
+        // The board a turn starts from, turned as the page turns.
+        let (mut board, _) = scene::board_from(&vol, &first, scene::HOST_START_POINTS, None).unwrap();
+        let mut turned_apart = false;
+        for (k, yaw) in [40.0f32, 80.0, 120.0].into_iter().enumerate() {
+            s.set_view(yaw, View::DEFAULT.pitch, DEFAULT_ZOOM);
+            s.redraw().unwrap();
+            let cfg = s.config(&vol);
+            board.with(|b| b.set_view(&cfg.view)).unwrap();
+            let want = scene::scene_of(board.board(), &vol, s.scene.as_ref().unwrap().capacity, &cfg);
+            assert_eq!(s.scene.as_ref().unwrap().samples, want.samples, "frame {k} of the turn");
+            turned_apart |= want.samples != scene::build(&vol, &cfg).unwrap().samples;
+        }
+        // (Else the test would not tell a turned frame from a built one.)
+        assert!(turned_apart, "every turned frame is also render's");
+        // The turn stops: render's still at the last view.
+        s.set_turning(false);
+        assert!(s.scene.is_none(), "a stopped turn is built again");
+        s.redraw().unwrap();
+        let cfg = s.config(&vol);
+        assert_eq!(s.scene.as_ref().unwrap().samples, scene::build(&vol, &cfg).unwrap().samples);
+        // A level changed while turning is loaded anew.
+        s.set_turning(true);
+        s.redraw().unwrap();
+        s.set_levels(vec![0.3]);
+        s.redraw().unwrap();
+        let cfg = s.config(&vol);
+        assert_eq!(s.scene.as_ref().unwrap().samples, scene::build(&vol, &cfg).unwrap().samples);
     }
 
     /// With the board preset, the page fits the volume to the board's
