@@ -1582,7 +1582,7 @@ mod tests {
         }
         // (A piece of line loses the spot's tail beyond WINDOW_SIGMAS at
         // either end, some 2e-4 of it: more pieces, a little less energy.)
-        let peak = one.energy().iter().fold(0.0f32, |m, &e| m.max(e));
+        let peak = peak(one.energy());
         for (a, b) in one.energy().iter().zip(many.energy()) {
             assert!((a - b).abs() <= 5e-4 * peak, "{a} vs {b} (peak {peak})");
         }
@@ -1605,14 +1605,23 @@ mod tests {
             for radius in [COARSE_GLOW_RADIUS, 4.5, 6.25, 12.0] {
                 let fine = blur(p.energy(), w, 0..h, 0..h, h, radius);
                 let coarse = glow_of(p.energy(), w, 0..h, 0..h, h, radius);
-                let peak = fine.iter().fold(0.0f32, |m, &e| m.max(e));
-                let worst = fine.iter().zip(&coarse).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+                let (peak, worst) = (peak(&fine), worst(&fine, &coarse));
                 assert!(worst <= 0.05 * peak, "{w}x{h}, radius {radius}: off by {worst} of a peak of {peak}");
                 let sum = |v: &[f32]| v.iter().map(|&e| f64::from(e)).sum::<f64>();
                 let (a, b) = (sum(&fine), sum(&coarse));
                 assert!((a - b).abs() <= 0.02 * a, "{w}x{h}, radius {radius}: energy {b} vs {a}");
             }
         }
+    }
+
+    /// The largest value of `v` (0 for none).
+    fn peak(v: &[f32]) -> f32 {
+        v.iter().fold(0.0, |m, &e| m.max(e))
+    }
+
+    /// The largest difference between `a` and `b`, value by value.
+    fn worst(a: &[f32], b: &[f32]) -> f32 {
+        a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
     }
 
     /// `samples` deposited one a call: every step a segment of its own (a
@@ -1677,8 +1686,7 @@ mod tests {
             p.deposit(samples.iter().copied());
             assert_eq!(p.segments, strokes as u64, "{name}: strokes");
             let q = step_by_step(cfg.clone(), &samples);
-            let peak = q.energy().iter().fold(0.0f32, |m, &e| m.max(e));
-            let worst = p.energy().iter().zip(q.energy()).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+            let (peak, worst) = (peak(q.energy()), worst(p.energy(), q.energy()));
             assert!(worst <= 0.15 * peak, "{name}: off by {worst} of a peak of {peak}");
             let (e, f) = (p.total_energy(), q.total_energy());
             // (Each segment loses its spot's tails beyond WINDOW_SIGMAS.)

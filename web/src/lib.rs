@@ -622,8 +622,10 @@ impl Scope {
     /// The frame of `cfg`, as [`scene::build`] makes it, its progress
     /// told to the page. On the host's memory it starts at the size the
     /// last frame needed if only the view changed since
-    /// ([`scene::with_board_from`]: the same frame, without contouring the
-    /// surface again at the sizes that did not fit).
+    /// ([`scene::board_from`]: the same frame, without contouring the
+    /// surface again at the sizes that did not fit). While the view turns,
+    /// the board it was built on comes with it, to turn
+    /// ([`Scope::set_turning`]).
     fn build(&self, wire: &WireVolume, cfg: &SceneConfig) -> Result<(Scene, Option<Turn>)> {
         let points = match &self.fit {
             Some((fit, points)) if *fit == self.fit_key() => *points,
