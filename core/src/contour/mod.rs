@@ -10,6 +10,8 @@
 //!   at the level).
 //! - [`compiled`]: that traversal worked out at compile time for every
 //!   subgrid with no node at the level: a lookup per crossing subgrid.
+//!   Where the target has vectors, the crossing subgrids of a block at one
+//!   level are worked out together (`batch`), the same numbers.
 //! - [`pen`]: placement of crossings and tidy drawing commands.
 //! - [`voxel`]: the sample types a grid may hold, the [`Voxel`] trait.
 //! - [`grid`]: [`grid::Grid2`] and [`grid::Volume`] views with strides.
@@ -24,6 +26,7 @@
 //! its direction code) and traversed for every level, the paper's point.
 //! Subgrids touching a NaN or infinite sample are skipped and counted.
 
+mod batch;
 pub mod compiled;
 pub mod grid;
 pub mod pen;
@@ -37,6 +40,7 @@ pub mod voxel;
 pub use voxel::Voxel;
 
 use crate::command::{Command, CommandSink};
+use batch::Batch;
 use core::ops::Range;
 use grid::{Grid2, GridError};
 use pen::{Pen, Placed, Placement};
@@ -228,6 +232,7 @@ pub struct RowContourer<'l> {
     /// Two rows' classes (the lower and upper, or the other way round:
     /// `flip`), and scratch.
     classes: [Classes; 3],
+    batch: Batch,
     flip: bool,
     /// Samples of the previous call's upper row whose classes are kept
     /// (0 when none are: the row had no cell, or took more than a block).
@@ -241,7 +246,13 @@ impl<'l> RowContourer<'l> {
     /// [`ContourError::NonFiniteLevel`].
     pub fn new<E>(levels: &'l [f32], traversal: Traversal) -> Result<Self, ContourError<E>> {
         check_levels(levels)?;
-        Ok(Self { sweep: Sweep::new(levels, traversal), classes: [[0; BLOCK + 9]; 3], flip: false, kept: 0 })
+        Ok(Self {
+            sweep: Sweep::new(levels, traversal),
+            classes: [[0; BLOCK + 9]; 3],
+            batch: Batch::new(),
+            flip: false,
+            kept: 0,
+        })
     }
 
     /// Contour the cells between the sample rows `lower` (grid row `j`) and
@@ -270,17 +281,20 @@ impl<'l> RowContourer<'l> {
             let r1 = upper.get(i0..=i0 + n).unwrap_or(&[]);
             let at = |k| Placement::new(i0 + k, j);
             let [lo, up, m] = &mut self.classes;
-            self.sweep.run_rows(r0, r1, [lo, up, m], at, |_, x, y| place(x, y), sink, stats)?;
+            self.sweep.run_rows(
+                r0,
+                r1,
+                [lo, up, m],
+                &mut self.batch,
+                at,
+                |_, x, y| place(x, y),
+                sink,
+                stats,
+            )?;
             i0 += n;
         }
         stats.cells += nx.saturating_sub(1) as u64;
         Ok(())
-    }
-
-    /// The lower row's classes, the upper row's and scratch.
-    fn classes(&mut self) -> [&mut Classes; 3] {
-        let [a, b, m] = &mut self.classes;
-        if self.flip { [b, a, m] } else { [a, b, m] }
     }
 
     /// As [`RowContourer::row`], where `lower` holds the same samples as
@@ -309,10 +323,21 @@ impl<'l> RowContourer<'l> {
         // The kept upper classes become the lower ones.
         self.flip = !self.flip;
         let sweep = self.sweep;
-        let [lo, up, m] = self.classes();
+        let [a, b, m] = &mut self.classes;
+        let [lo, up] = if self.flip { [b, a] } else { [a, b] };
         sweep.classify(upper, up);
         let at = |k| Placement::new(k, j);
-        sweep.run_classed(lower, upper, [lo, up], m, at, |_, x, y| place(x, y), sink, stats)?;
+        sweep.run_classed(
+            lower,
+            upper,
+            [lo, up],
+            m,
+            &mut self.batch,
+            at,
+            |_, x, y| place(x, y),
+            sink,
+            stats,
+        )?;
         stats.cells += nx.saturating_sub(1) as u64;
         Ok(())
     }
@@ -370,6 +395,7 @@ pub fn contour_rows<T: Voxel, P, S: CommandSink<P>>(
                     r0,
                     r1,
                     [c0, c1, c2],
+                    &mut scratch.batch,
                     |k| Placement::new(i0 + k, j),
                     |_, x, y| place(x, y),
                     sink,

@@ -99,12 +99,25 @@ impl Placement {
     /// is `a - 0.5 * t`, and `a + 0.0 * t` is `a` for `t >= 0` and `a >= 0`.
     #[inline(always)]
     pub(crate) fn along(&self, edge: usize, t: f32) -> (f32, f32) {
-        let e = edge & 7;
-        let x = self.x.get((FROM_X1 >> e) & 1).copied().unwrap_or(0.0);
-        let y = self.y.get((FROM_Y1 >> e) & 1).copied().unwrap_or(0.0);
-        let (kx, ky) = (ALONG_X.get(e).copied().unwrap_or(0.0), ALONG_Y.get(e).copied().unwrap_or(0.0));
-        (x + kx * t, y + ky * t)
+        along_in(self.x, self.y, edge, t)
     }
+
+    /// The cell's two grid columns and two grid rows.
+    #[inline(always)]
+    pub(crate) const fn sides(&self) -> ([f32; 2], [f32; 2]) {
+        (self.x, self.y)
+    }
+}
+
+/// [`Placement::along`] of the cell with columns `xs` and rows `ys` (a
+/// batch of cells works out their points apart from their placements).
+#[inline(always)]
+pub(crate) fn along_in(xs: [f32; 2], ys: [f32; 2], edge: usize, t: f32) -> (f32, f32) {
+    let e = edge & 7;
+    let x = xs.get((FROM_X1 >> e) & 1).copied().unwrap_or(0.0);
+    let y = ys.get((FROM_Y1 >> e) & 1).copied().unwrap_or(0.0);
+    let (kx, ky) = (ALONG_X.get(e).copied().unwrap_or(0.0), ALONG_Y.get(e).copied().unwrap_or(0.0));
+    (x + kx * t, y + ky * t)
 }
 
 // Per edge index (B0..B3, S0..S3): whether the edge starts at `x1` rather

@@ -187,6 +187,7 @@ pub fn contour_slab<T: Voxel, S: SurfaceSink>(
                                 l1,
                                 [c0, c1],
                                 m,
+                                &mut scratch.batch,
                                 |k| Placement::new(x0 + k, y),
                                 place,
                                 &mut to,
@@ -205,6 +206,7 @@ pub fn contour_slab<T: Voxel, S: SurfaceSink>(
                                 h0,
                                 [c0, c2],
                                 m,
+                                &mut scratch.batch,
                                 |k| Placement::new(x0 + k, z),
                                 place,
                                 &mut to,
@@ -212,7 +214,33 @@ pub fn contour_slab<T: Voxel, S: SurfaceSink>(
                             )
                             .map_err(ContourError::Sink)?;
                     }
-                    if h1_in {
+                    if h1_in && sweep.batched() {
+                        and_across(m, [c0, c1, c2, c3], ys);
+                        let batch = &mut scratch.batch;
+                        batch.clear();
+                        let at = Placement::new(y, z);
+                        let _ = each_busy::<()>(m, ys, |k| {
+                            if let (Some(&a), Some(&b), Some(&c), Some(&d)) =
+                                (l0.get(k), l1.get(k), h1.get(k), h0.get(k))
+                            {
+                                batch.push(k, [a, b, c, d], at);
+                            }
+                            Ok(())
+                        });
+                        batch.solve(sweep.levels.first().copied().unwrap_or(0.0));
+                        batch
+                            .each(|i, k, corners, program| {
+                                let slice = SliceId { plane: Plane::YZ, index: x0 + k };
+                                let fx = (x0 + k) as f32;
+                                let place = |u, v| Plane::YZ.to_voxel(fx, u, v);
+                                let to = &mut SliceSink { sink: &mut *sink, slice };
+                                match program {
+                                    Some(p) => batch.draw(i, p, &place, to, &mut stats),
+                                    None => sweep.cell(corners, at, &place, to, &mut stats),
+                                }
+                            })
+                            .map_err(ContourError::Sink)?;
+                    } else if h1_in {
                         and_across(m, [c0, c1, c2, c3], ys);
                         each_busy(m, ys, |k| {
                             let (Some(&a), Some(&b), Some(&c), Some(&d)) =
