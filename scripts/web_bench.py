@@ -136,31 +136,35 @@ def main():
     ap.add_argument("--frames", type=int, default=60, help="frames timed while rotating (default 60)")
     ap.add_argument("--levels", type=int, default=10, help="level changes timed (default 10)")
     ap.add_argument("--size", type=int, default=640, help="the picture, pixels a side (the page's default 640)")
+    ap.add_argument("--painters", type=int, default=0,
+                    help="painters of a band each (the page's ?painters=; default: the page's own)")
     args = ap.parse_args()
     if args.frames < 2 or args.levels < 1:
         fail("give at least 2 frames and 1 level change")
     data = Path(args.data) if args.data else None
+    page = f"size={args.size}" + (f"&painters={args.painters}" if args.painters else "")
     out = {
         "date": datetime.date.today().isoformat(),
         "machine": machine(),
         "load_average": " ".join(f"{x:.2f}" for x in os.getloadavg()),
         "size": args.size,
+        "painters": args.painters or "page default",
     }
     t0 = time.monotonic()
     with web_driver.session(args.sim) as (b, base, _tmp):
         out["chromium"] = b.send("Browser.getVersion", session=False)["product"]
-        b.send("Page.navigate", {"url": f"{base}?demo=hydrogen:32&size={args.size}"})
+        b.send("Page.navigate", {"url": f"{base}?demo=hydrogen:32&{page}"})
         settle(b, "hydrogen:32 to show")
         out.update(rotate(b, "hydrogen32_rotate", args.frames))
         if data and (data / FILE_SCENE).exists():
-            open_file(b, base, data / FILE_SCENE, f"size={args.size}")
+            open_file(b, base, data / FILE_SCENE, page)
             b.wait(f"(() => {{ const i = window.isoscope.info(); return window.isoscope.error !== null || "
                    f"(i && i.name === {json.dumps(FILE_SCENE)}); }})()", f"{FILE_SCENE} to load", timeout=120)
             settle(b, f"{FILE_SCENE} to show")
             out.update(rotate(b, "mri_rotate", args.frames))
         else:
             print(f"web-bench: note: no {FILE_SCENE} in the data folder (scripts/fetch-data); the MRI head is left out")
-        b.send("Page.navigate", {"url": f"{base}?demo={LEVEL_DEMO}&size={args.size}"})
+        b.send("Page.navigate", {"url": f"{base}?demo={LEVEL_DEMO}&{page}"})
         settle(b, f"{LEVEL_DEMO} to show")
         out.update(level_changes(b, "gyroid128_level", args.levels))
     out["bench_seconds"] = time.monotonic() - t0

@@ -59,8 +59,8 @@ GOLDEN_BIG, GOLDEN_BIG_SHARE = 16, 0.001
 SCENES = [
     ("hydrogen 32^3, defaults", "demo=hydrogen:32", ["--demo", "hydrogen:32"]),
     (
-        "torus 24^3 on the f407 board, turned, zoomed out, two planes",
-        "demo=torus:24&level=0.3&yaw=-40&pitch=35&zoom=0.75&axes=xy,yz&every=2&board=f407",
+        "torus 24^3 on the f407 board, turned, zoomed out, two planes, three painters",
+        "demo=torus:24&level=0.3&yaw=-40&pitch=35&zoom=0.75&axes=xy,yz&every=2&board=f407&painters=3",
         ["--demo", "torus:24", "--level", "0.3", "--yaw", "-40", "--pitch", "35", "--margin", "0.125",
          "--axes", "xy,yz", "--every", "2", "--board", "f407"],
     ),

@@ -17,6 +17,8 @@ const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
 const DEFAULT_VIEW = { yaw: 30, pitch: 20, zoom: 0.9 };
 const SPIN_DEG_PER_S = 20;
+// Painters of a band each (see `painters`).
+const PAINTERS_DEFAULT = 1;
 // Work shown with its progress once it has run this long.
 const BUSY_AFTER_MS = 300;
 
@@ -63,7 +65,13 @@ const audio = setupAudio(call, api);
 // the scope built, so that the next frame is built while the last one is
 // drawn. The requests neither has answered, oldest first.
 const worker = new Worker(new URL('./worker.js', import.meta.url), { type: 'module' });
-const painter = new Worker(new URL('./worker.js', import.meta.url), { type: 'module' });
+// The painters: each draws a band of the picture's rows from the same
+// samples (render's bytes together: `?painters=N`, 1 to 4, PAINTERS_DEFAULT
+// unless said), so that a frame is drawn on as many cores.
+const painters = Array.from(
+  { length: Math.round(Math.min(4, Math.max(1, param('painters', PAINTERS_DEFAULT)))) },
+  () => new Worker(new URL('./worker.js', import.meta.url), { type: 'module' }),
+);
 const waiting = new Map();
 let nextId = 0;
 let progress = null;
@@ -81,11 +89,27 @@ function ask(to, op, args = {}, transfer = []) {
 function call(op, args, transfer) {
   return ask(worker, op, args, transfer);
 }
-function paint(op, args, transfer) {
-  return ask(painter, op, args, transfer);
+// A frame's samples to every painter: the parts of its picture.
+function paint(samples, clear) {
+  return Promise.all(
+    painters.map((p, k) => {
+      const s = k === painters.length - 1 ? samples : samples.slice();
+      return ask(p, 'paint', { samples: s, clear }, [s.buffer]);
+    }),
+  );
 }
 
-for (const [w, name] of [[worker, 'worker'], [painter, 'painter']]) {
+// The picture as render's PNG: the painter's, or the bands' RGB joined.
+async function picturePng() {
+  if (painters.length === 1) return ask(painters[0], 'png');
+  const parts = await Promise.all(painters.map((p) => ask(p, 'rgb')));
+  const rgb = new Uint8Array(parts.reduce((n, a) => n + a.length, 0));
+  parts.reduce((at, a) => (rgb.set(a, at), at + a.length), 0);
+  return ask(painters[0], 'pngOf', { size: $('screen').width, rgb }, [rgb.buffer]);
+}
+
+const named = painters.map((p, k) => [p, painters.length > 1 ? `painter ${k + 1}` : 'painter']);
+for (const [w, name] of [[worker, 'worker'], ...named]) {
   w.onmessage = (e) => {
     const m = e.data;
     if (m.progress) {
@@ -214,11 +238,16 @@ async function redraw() {
 // drawn (frames are drawn in the order built).
 function show(frame, t0) {
   painting += 1;
-  paint('paint', { samples: frame.samples, clear: frame.clear }, [frame.samples.buffer])
-    .then((p) => {
-      const rgba = new Uint8ClampedArray(p.pixels.buffer);
-      $('screen').getContext('2d').putImageData(new ImageData(rgba, p.size, p.size), 0, 0);
-      stats = { ...JSON.parse(frame.stats), draw_ms: p.drawMs, pixels_ms: p.pixelsMs };
+  paint(frame.samples, frame.clear)
+    .then((parts) => {
+      const screen = $('screen').getContext('2d');
+      for (const p of parts) {
+        const rgba = new Uint8ClampedArray(p.pixels.buffer);
+        const rows = rgba.length / (4 * p.size);
+        if (rows > 0) screen.putImageData(new ImageData(rgba, p.size, rows), 0, p.first);
+      }
+      const slowest = (key) => Math.max(...parts.map((p) => p[key]));
+      stats = { ...JSON.parse(frame.stats), draw_ms: slowest('drawMs'), pixels_ms: slowest('pixelsMs') };
       api.frameMs = performance.now() - t0;
       api.frames += 1;
       api.ready = true;
@@ -351,7 +380,7 @@ async function exportFile(kind) {
   const [type, ext] = EXPORTS[kind];
   try {
     // The picture is the painter's; the rest the scope's.
-    const data = kind === 'png' ? await paint('png') : await call('export', { kind });
+    const data = kind === 'png' ? await picturePng() : await call('export', { kind });
     const url = URL.createObjectURL(new Blob([data], { type }));
     const a = Object.assign(document.createElement('a'), { href: url, download: baseName() + ext });
     document.body.append(a);
@@ -443,7 +472,11 @@ async function main() {
   $('screen').width = size;
   $('screen').height = size;
   requestAnimationFrame(tick);
-  await Promise.all([call('init', { size, paints: false }), paint('paintInit', { size })]);
+  const bands = painters.length;
+  await Promise.all([
+    call('init', { size, paints: false }),
+    ...painters.map((p, band) => ask(p, 'paintInit', { size, band, bands })),
+  ]);
   view.yaw = param('yaw', view.yaw);
   view.pitch = param('pitch', view.pitch);
   view.zoom = param('zoom', view.zoom);

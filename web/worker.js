@@ -8,7 +8,7 @@
 // sends { progress: { id, label, done, total } } (total 0: a step with no
 // count) when the step changes and at most every PROGRESS_MS otherwise.
 
-import init, { Link, Painter, Scope } from './isoscope_web.js';
+import init, { Link, Painter, Scope, png_of } from './isoscope_web.js';
 
 const PROGRESS_MS = 100;
 
@@ -44,22 +44,32 @@ const ops = {
     scope.set_drawing(paints);
     return answer(null);
   },
-  async paintInit({ size }) {
+  // A painter of the whole picture, or of band `band` of `bands` (rows
+  // split as render splits them on threads).
+  async paintInit({ size, band = 0, bands = 1 }) {
     await init();
-    painter = new Painter(size);
+    painter = bands > 1 ? Painter.band(size, band, bands) : new Painter(size);
     return answer(null);
   },
   // Draw a frame's samples (x, y, beam a sample) on a dark screen or over
-  // the last one: its pixels.
+  // the last one: its pixels (a band's rows, from row `first`).
   paint({ samples, clear }) {
     painter.paint(samples, clear);
     const t0 = performance.now();
     const pixels = painter.pixels();
     const pixelsMs = performance.now() - t0;
-    return answer({ size: painter.size(), pixels, drawMs: painter.draw_ms(), pixelsMs }, [pixels.buffer]);
+    const [size, first] = [painter.size(), painter.first_row()];
+    return answer({ size, first, pixels, drawMs: painter.draw_ms(), pixelsMs }, [pixels.buffer]);
   },
   png() {
     return bytes(painter.png());
+  },
+  // The band's rows as RGB, and the bands' RGB as render's PNG.
+  rgb() {
+    return bytes(painter.rgb());
+  },
+  pngOf({ size, rgb }) {
+    return bytes(png_of(size, rgb));
   },
   demo({ spec }) {
     scope.load_demo(spec);

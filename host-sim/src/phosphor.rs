@@ -907,12 +907,43 @@ impl Screen {
     /// # Errors
     /// [`PhosphorConfig::validate`]'s.
     pub fn new(cfg: PhosphorConfig, bands: usize) -> Result<Self, PhosphorError> {
-        let height = cfg.height as usize;
-        let n = bands.clamp(1, height.max(1));
-        let edge = |k: usize| k * height / n;
-        let bands =
-            (0..n).map(|k| Phosphor::band(cfg.clone(), edge(k)..edge(k + 1))).collect::<Result<_, _>>()?;
+        let n = Self::band_count(&cfg, bands);
+        let bands = (0..n)
+            .map(|k| Phosphor::band(cfg.clone(), Self::band_rows(&cfg, k, n)))
+            .collect::<Result<_, _>>()?;
         Ok(Self { cfg, bands })
+    }
+
+    /// Band `band` of the `bands` of [`Screen::new`] alone: a screen of
+    /// its rows, drawn from the same samples as the whole picture (another
+    /// thread or worker draws the others). `band` past the last is the
+    /// last.
+    ///
+    /// # Errors
+    /// [`PhosphorConfig::validate`]'s.
+    pub fn band(cfg: PhosphorConfig, band: usize, bands: usize) -> Result<Self, PhosphorError> {
+        let n = Self::band_count(&cfg, bands);
+        let rows = Self::band_rows(&cfg, band.min(n - 1), n);
+        let bands = vec![Phosphor::band(cfg.clone(), rows)?];
+        Ok(Self { cfg, bands })
+    }
+
+    /// How many bands a picture of `cfg` is drawn in when `bands` are
+    /// asked for: at least one, at most a row each.
+    fn band_count(cfg: &PhosphorConfig, bands: usize) -> usize {
+        bands.clamp(1, (cfg.height as usize).max(1))
+    }
+
+    /// The rows of band `k` of `n`.
+    fn band_rows(cfg: &PhosphorConfig, k: usize, n: usize) -> Range<usize> {
+        let height = cfg.height as usize;
+        k * height / n..(k + 1) * height / n
+    }
+
+    /// The picture's rows this screen draws: all of them, or a band's.
+    pub fn rows(&self) -> Range<usize> {
+        let start = self.bands.first().map_or(0, |b| b.rows().start);
+        start..self.bands.last().map_or(start, |b| b.rows().end)
     }
 
     /// The configuration.
@@ -1009,7 +1040,7 @@ fn write_png(path: &Path, width: u32, rows: usize, rgb: &[u8]) -> anyhow::Result
 /// The bytes of an 8-bit RGB PNG of `rgb` (`width` pixels by `rows`):
 /// none for no rows (writing to a `Vec` cannot fail otherwise, and the
 /// header matches the data: a validated size, three bytes a pixel).
-fn encode_png(width: u32, rows: usize, rgb: &[u8]) -> Vec<u8> {
+pub fn encode_png(width: u32, rows: usize, rgb: &[u8]) -> Vec<u8> {
     let mut out = Vec::new();
     match png_to(&mut out, width, rows, rgb) {
         Ok(()) => out,

@@ -335,7 +335,7 @@ impl Scope {
         Ok(true)
     }
 
-    /// The picture: `size * size` RGBA pixels, row by row from the top.
+    /// The picture (a band's rows), RGBA pixels, row by row from the top.
     pub fn pixels(&self) -> Vec<u8> {
         self.screen.to_rgba8()
     }
@@ -463,10 +463,34 @@ impl Scope {
 /// A dark `size` by `size` screen of one band, as the page draws it (a
 /// scope's own, or a painter's).
 fn page_screen(size: u32) -> Result<Screen> {
+    Screen::new(page_config(size)?, 1).context("invalid picture settings")
+}
+
+/// The phosphor of a `size` by `size` picture, as `render --size` draws it.
+fn page_config(size: u32) -> Result<PhosphorConfig> {
     if !(1..=MAX_SIZE).contains(&size) {
         bail!("the picture must be 1 to {MAX_SIZE} pixels a side, not {size}");
     }
-    Screen::new(PhosphorConfig::with_size(size, size), 1).context("invalid picture settings")
+    Ok(PhosphorConfig::with_size(size, size))
+}
+
+/// A `size` by `size` picture's 8-bit RGB rows (the band painters'
+/// [`Painter::rgb`], one after the other) as `render`'s PNG file.
+///
+/// # Errors
+/// A size of 0 or above 2048, or not `size * size * 3` bytes.
+#[wasm_bindgen]
+pub fn png_of(size: u32, rgb: &[u8]) -> Result<Vec<u8>, JsError> {
+    png_bytes_of(size, rgb).map_err(js)
+}
+
+fn png_bytes_of(size: u32, rgb: &[u8]) -> Result<Vec<u8>> {
+    page_config(size)?;
+    let want = size as usize * size as usize * 3;
+    if rgb.len() != want {
+        bail!("a {size} by {size} picture is {want} RGB bytes, not {}", rgb.len());
+    }
+    Ok(isoscope_sim::phosphor::encode_png(size, size as usize, rgb))
 }
 
 impl Scope {
@@ -789,6 +813,28 @@ impl Painter {
         Self::with_size(size).map_err(js)
     }
 
+    /// A painter of band `band` of `bands` (rows split as `render` splits
+    /// them on threads) of a `size` by `size` picture: several, in workers
+    /// of their own, draw one picture from the same samples, each its
+    /// rows ([`Painter::first_row`] on), `render`'s bytes together.
+    ///
+    /// # Errors
+    /// A size of 0 or above 2048.
+    pub fn band(size: u32, band: u32, bands: u32) -> Result<Painter, JsError> {
+        Self::band_of(size, band, bands).map_err(js)
+    }
+
+    /// The first row of the picture this painter draws (0 for the whole).
+    pub fn first_row(&self) -> u32 {
+        self.screen.rows().start as u32
+    }
+
+    /// The rows this painter draws, as 8-bit RGB (what [`png_of`] takes,
+    /// the bands' one after the other).
+    pub fn rgb(&self) -> Vec<u8> {
+        self.screen.to_rgb8()
+    }
+
     /// Draw a frame of `samples` (`x, y, beam` a sample, as
     /// [`Scope::frame_samples`] gives them): on a dark screen if `clear`,
     /// else over the last frame, faded.
@@ -799,7 +845,7 @@ impl Painter {
         self.draw(samples, clear).map_err(js)
     }
 
-    /// The picture: `size * size` RGBA pixels, row by row from the top.
+    /// The picture (a band's rows), RGBA pixels, row by row from the top.
     pub fn pixels(&self) -> Vec<u8> {
         self.screen.to_rgba8()
     }
@@ -823,6 +869,12 @@ impl Painter {
 impl Painter {
     fn with_size(size: u32) -> Result<Self> {
         Ok(Self { screen: page_screen(size)?, draw_ms: 0.0 })
+    }
+
+    fn band_of(size: u32, band: u32, bands: u32) -> Result<Self> {
+        let screen = Screen::band(page_config(size)?, band as usize, bands as usize)
+            .context("invalid picture settings")?;
+        Ok(Self { screen, draw_ms: 0.0 })
     }
 
     fn draw(&mut self, samples: &[u16], clear: bool) -> Result<()> {
@@ -1114,6 +1166,38 @@ mod tests {
         assert!(building.png_bytes().is_err(), "a scope that does not draw has no PNG of its own");
         assert!(painter.draw(&[1, 2], true).is_err(), "samples come in threes");
         assert!(Painter::with_size(0).is_err());
+    }
+
+    #[test]
+    fn band_painters_draw_the_painters_picture_together() {
+        // Three painters of a band each (64 rows: 21, 21, 22), given the
+        // same samples: their rows one after the other are the whole
+        // painter's pixels, and their RGB as a PNG its PNG, frame after
+        // frame, persistence on and off.
+        let mut building = Scope::with_size(64).unwrap();
+        building.set_drawing(false);
+        building.demo("torus:12").unwrap();
+        let mut whole = Painter::with_size(64).unwrap();
+        let mut bands: Vec<Painter> = (0..3).map(|k| Painter::band_of(64, k, 3).unwrap()).collect();
+        assert_eq!(bands.iter().map(Painter::first_row).collect::<Vec<_>>(), [0, 21, 42]);
+        for (yaw, persistence) in [(30.0, false), (60.0, true), (90.0, true), (120.0, false)] {
+            building.set_view(yaw, 20.0, DEFAULT_ZOOM);
+            building.set_persistence(persistence);
+            assert!(building.update().unwrap());
+            let samples = building.frame_samples();
+            whole.draw(&samples, building.clears()).unwrap();
+            for b in &mut bands {
+                b.draw(&samples, building.clears()).unwrap();
+            }
+            let pixels: Vec<u8> = bands.iter().flat_map(Painter::pixels).collect();
+            assert!(pixels == whole.pixels(), "yaw {yaw}, persistence {persistence}");
+            let rgb: Vec<u8> = bands.iter().flat_map(Painter::rgb).collect();
+            assert_eq!(png_bytes_of(64, &rgb).unwrap(), whole.png());
+        }
+        assert!(whole.pixels().iter().any(|&v| v > 0 && v < 255), "a picture, not a dark screen");
+        assert!(png_bytes_of(64, &[0; 5]).is_err(), "not 64 * 64 * 3 bytes");
+        assert!(Painter::band_of(0, 0, 2).is_err());
+        assert_eq!(Painter::band_of(64, 9, 2).unwrap().first_row(), 32, "past the last band: the last");
     }
 
     #[test]
