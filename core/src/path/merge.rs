@@ -126,7 +126,8 @@ impl Out {
         // one, lies within the tolerance of the chord kept -> q.
         if let (Some(kept), Some(last)) = (self.kept, self.last) {
             if self.tol2 > 0.0 && self.n_dropped < MERGE_SPAN {
-                let near = |p: Packed| chord_dist2(kept, q, p) <= self.tol2;
+                let chord = Chord::new(kept, q);
+                let near = |p: Packed| chord.dist2(p) <= self.tol2;
                 if near(last) && self.dropped.iter().take(self.n_dropped).all(|&p| near(p)) {
                     dst.pop();
                     if let Some(slot) = self.dropped.get_mut(self.n_dropped) {
@@ -168,18 +169,37 @@ impl Out {
     }
 }
 
-/// Squared distance from `p` to the segment `a`-`b` (fixed point codes).
-pub(super) fn chord_dist2(a: Packed, b: Packed, p: Packed) -> f32 {
-    let v = |q: Packed| [f32::from(q[0]), f32::from(q[1]), f32::from(q[2])];
-    let (a, b, p) = (v(a), v(b), v(p));
-    let ab = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-    let ap = [p[0] - a[0], p[1] - a[1], p[2] - a[2]];
-    let len2 = ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2];
-    let t = if len2 > 0.0 {
-        ((ap[0] * ab[0] + ap[1] * ab[1] + ap[2] * ab[2]) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let d = [ap[0] - t * ab[0], ap[1] - t * ab[1], ap[2] - t * ab[2]];
-    d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+/// A chord `a`-`b` (fixed point codes), worked out once for the points
+/// checked against it.
+#[derive(Debug, Clone, Copy)]
+struct Chord {
+    a: [f32; 3],
+    ab: [f32; 3],
+    len2: f32,
+}
+
+impl Chord {
+    fn new(a: Packed, b: Packed) -> Self {
+        let (a, b) = (as_f32(a), as_f32(b));
+        let ab = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+        Self { a, ab, len2: ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2] }
+    }
+
+    /// Squared distance from `p` to the segment.
+    fn dist2(&self, p: Packed) -> f32 {
+        let (a, ab, len2, p) = (self.a, self.ab, self.len2, as_f32(p));
+        let ap = [p[0] - a[0], p[1] - a[1], p[2] - a[2]];
+        let t = if len2 > 0.0 {
+            ((ap[0] * ab[0] + ap[1] * ab[1] + ap[2] * ab[2]) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let d = [ap[0] - t * ab[0], ap[1] - t * ab[1], ap[2] - t * ab[2]];
+        d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+    }
+}
+
+/// A code's coordinates as `f32` (exact).
+fn as_f32(q: Packed) -> [f32; 3] {
+    [f32::from(q[0]), f32::from(q[1]), f32::from(q[2])]
 }
