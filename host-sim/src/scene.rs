@@ -301,9 +301,9 @@ pub fn build(vol: &WireVolume, cfg: &SceneConfig) -> Result<Scene> {
 pub fn scene_of(board: &InProcess<'_>, vol: &WireVolume, capacity: Capacity, cfg: &SceneConfig) -> Scene {
     let engine = board.engine();
     let mut frame = engine.frame();
-    let samples: Vec<Sample> = frame.by_ref().collect();
+    let (samples, replay_bytes) = recorded(&mut frame, engine.frame_stats().samples);
+    let replay_bytes = replay_bytes.unwrap_or_else(|| self::replay_bytes(engine.frame(), samples.len()));
     let surface = engine.surface();
-    let replay_bytes = replay_bytes(engine.frame(), samples.len());
     let frame = frame.stats();
     // Only an empty picture needs the values (a pass over the volume).
     let values = (frame.lit_samples == 0).then(|| values(vol)).flatten();
@@ -346,11 +346,41 @@ fn values(vol: &WireVolume) -> Option<crate::info::Summary> {
     Some(crate::info::summarize(&loaded, crate::info::LEVEL_BINS))
 }
 
+/// The samples of `frame` and the bytes a board's replay of it takes, in
+/// one pass of the schedule (not one for the samples and one for the
+/// recording), with memory for the `counted` samples the engine counted
+/// the picture's frame at: no bytes if it had more (a count of another
+/// frame), to be worked out apart.
+fn recorded(frame: &mut impl SampleSource, counted: u64) -> (Vec<Sample>, Option<usize>) {
+    let mut samples = Vec::new();
+    let Some(counted) = usize::try_from(counted).ok().filter(|&n| n < usize::MAX / 16) else {
+        frame.fill_with(usize::MAX, |s| samples.push(s));
+        return (samples, None);
+    };
+    samples.reserve(counted);
+    let mut mem = vec![0u8; replay_memory(counted)];
+    let mut kept = Kept::new();
+    let mut replay = Replay::new(&mut mem, &mut kept);
+    let Some(mut rec) = replay.record(0) else {
+        frame.fill_with(usize::MAX, |s| samples.push(s));
+        return (samples, None);
+    };
+    rec.fill_with(frame, usize::MAX, |s| samples.push(s));
+    rec.finish(FrameStats::default());
+    let fits = samples.len() <= counted;
+    (samples, fits.then(|| replay.len()))
+}
+
+/// Memory enough to record a frame of `samples` samples: a repeat run,
+/// the longest a sample takes, is 8 bytes.
+fn replay_memory(samples: usize) -> usize {
+    8 * samples + 8
+}
+
 /// Bytes a board's replay of `frame` (of `samples` samples) takes, as the
 /// core records it.
 fn replay_bytes(mut frame: impl SampleSource, samples: usize) -> usize {
-    // A repeat run, the longest a sample takes, is 8 bytes.
-    let mut mem = vec![0u8; 8 * samples + 8];
+    let mut mem = vec![0u8; replay_memory(samples)];
     let mut kept = Kept::new();
     let mut replay = Replay::new(&mut mem, &mut kept);
     let Some(mut rec) = replay.record(0) else { return 0 };
@@ -658,6 +688,35 @@ mod tests {
         .unwrap();
         assert!(scene.capacity.points > HOST_START_POINTS, "the memory did not grow: {:?}", scene.capacity);
         assert_eq!(progress.done(), progress.total());
+    }
+
+    /// One pass of the schedule gives the samples and the replay's bytes
+    /// that a pass for each gives; a count short of the frame gives its
+    /// samples and leaves the bytes to the second pass.
+    #[test]
+    fn one_pass_records_what_two_passes_do() {
+        for (d, n, on_board) in
+            [(Demo::Hydrogen, 16, false), (Demo::Torus, 12, true), (Demo::Gyroid, 16, false)]
+        {
+            let vol = demo(d, n);
+            let mut cfg = SceneConfig { levels: vec![d.default_level()], ..SceneConfig::default() };
+            if on_board {
+                cfg.memory = Memory::Board(Board::F407);
+            }
+            with_board(&vol, &cfg, None, |board, _| {
+                let engine = board.engine();
+                let counted = engine.frame_stats().samples;
+                let want: Vec<Sample> = engine.frame().collect();
+                assert_eq!(counted, want.len() as u64, "{d:?}: the engine counted this frame");
+                let bytes = replay_bytes(engine.frame(), want.len());
+                assert!(bytes > 0, "{d:?}");
+                assert_eq!(recorded(&mut engine.frame(), counted), (want.clone(), Some(bytes)), "{d:?}");
+                assert_eq!(recorded(&mut engine.frame(), counted - 1), (want.clone(), None), "{d:?}: short");
+                assert_eq!(recorded(&mut engine.frame(), u64::MAX), (want, None), "{d:?}: no count");
+                Ok(())
+            })
+            .unwrap();
+        }
     }
 
     #[test]

@@ -900,6 +900,14 @@ impl<'a> Engine<'a> {
         self.chain
     }
 
+    /// The statistics of the picture's frame as last counted: at each
+    /// picture, or from the frames played with
+    /// [`Engine::count_while_playing`] (then a frame late; default until
+    /// one is counted).
+    pub fn frame_stats(&self) -> FrameStats {
+        self.dev.frame
+    }
+
     /// What the engine is doing.
     pub fn state(&self) -> DeviceState {
         self.dev.state()
