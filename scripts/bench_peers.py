@@ -9,7 +9,9 @@ by `write_demo`, read by every tool from the same file): N x-y slices
 vol[z,:,:], N x-z slices vol[:,y,:] and N y-z slices vol[:,:,x], contoured at
 one level (0), one thread. A slice of nx x ny samples has (nx-1)(ny-1) cells,
 so the workload is 3N(N-1)^2 cells for every tool, and every `*_mcells`
-figure is those cells / seconds / 1e6. Each figure is the best of --reps runs.
+figure is those cells / seconds / 1e6. Each figure is the best of --reps runs,
+taken round by round (each tool once a round, so that a machine whose speed
+drifts slows all of them alike).
 
 What each tool's time covers:
   isoscope_*       isoscope-sim's own `--stats` `seconds`: the contouring of
@@ -263,6 +265,16 @@ def best(reps, f):
     return min(f() for _ in range(reps))
 
 
+def best_of_rounds(reps, fs):
+    """The fewest seconds of each of `fs` over `reps` rounds, each round
+    timing every one of them once, in turn."""
+    secs = [[] for _ in fs]
+    for _ in range(reps):
+        for f, s in zip(fs, secs):
+            s.append(f())
+    return [min(s) for s in secs]
+
+
 def bandwidth(vol, reps):
     """Bytes per second of a streaming read of the contiguous volume."""
     flat = vol.ravel()
@@ -400,21 +412,35 @@ def main():
     say("reps", reps)
 
     one = [a.level]
-    iso = mc(best(reps, lambda: iso_seconds(a.sim, a.raw, n, one, 1, cells)))
-    vtk_mc = mc(best(reps, lambda: vtk_seconds(vol, one)))
-    cp = mc(best(reps, lambda: contourpy_seconds(vol, one)))
+    # Round by round (isoscope, VTK, contourpy, then again), the best of
+    # each: a machine whose speed drifts over a minute slows all three
+    # alike, not the one timed then.
+    iso_s, vtk_s, cp_s = best_of_rounds(reps, [
+        lambda: iso_seconds(a.sim, a.raw, n, one, 1, cells),
+        lambda: vtk_seconds(vol, one),
+        lambda: contourpy_seconds(vol, one),
+    ])
+    iso, vtk_mc, cp = mc(iso_s), mc(vtk_s), mc(cp_s)
     say("isoscope_mcells", f"{iso:.1f}")
     say("vtk_fe2d_mcells", f"{vtk_mc:.1f}")
     say("contourpy_mcells", f"{cp:.1f}")
     say("ratio_to_best", f"{iso / max(vtk_mc, cp):.2f}")
 
-    iso2 = mc(best(reps, lambda: iso_seconds(a.sim, a.raw, n, one, 2, cells)))
-    say("isoscope_2t_mcells", f"{iso2:.1f}")
-    say("scaling_2t", f"{iso2 / iso:.2f}")
+    one_t, two_t = best_of_rounds(reps, [
+        lambda: iso_seconds(a.sim, a.raw, n, one, 1, cells),
+        lambda: iso_seconds(a.sim, a.raw, n, one, 2, cells),
+    ])
+    say("isoscope_2t_mcells", f"{mc(two_t):.1f}")
+    say("scaling_2t", f"{one_t / two_t:.2f}")
 
-    say("isoscope_10_mcells", f"{mc(best(reps, lambda: iso_seconds(a.sim, a.raw, n, ten, 1, cells))):.1f}")
-    say("vtk_fe2d_10_mcells", f"{mc(best(reps, lambda: vtk_seconds(vol, ten))):.1f}")
-    say("contourpy_10_mcells", f"{mc(best(reps, lambda: contourpy_seconds(vol, ten))):.1f}")
+    iso10, vtk10, cp10 = best_of_rounds(reps, [
+        lambda: iso_seconds(a.sim, a.raw, n, ten, 1, cells),
+        lambda: vtk_seconds(vol, ten),
+        lambda: contourpy_seconds(vol, ten),
+    ])
+    say("isoscope_10_mcells", f"{mc(iso10):.1f}")
+    say("vtk_fe2d_10_mcells", f"{mc(vtk10):.1f}")
+    say("contourpy_10_mcells", f"{mc(cp10):.1f}")
 
     skip_mc = mc(best(reps, lambda: iso_seconds(a.sim, a.raw, n, [skip], 1, cells)))
     bw = bandwidth(vol, max(reps, 5))
