@@ -17,8 +17,11 @@ const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
 const DEFAULT_VIEW = { yaw: 30, pitch: 20, zoom: 0.9 };
 const SPIN_DEG_PER_S = 20;
-// Painters of a band each (see `painters`).
-const PAINTERS_DEFAULT = 1;
+// Painters of a band each (see `painters`): one for each core beyond the
+// two the page's thread and the scope's worker keep busy, at least one.
+// (On two cores two painters were no faster than one: 35 against 32 to 39
+// frames a second turning hydrogen 32^3, docs/web.md.)
+const PAINTERS_DEFAULT = Math.min(4, Math.max(1, (navigator.hardwareConcurrency || 2) - 2));
 // Work shown with its progress once it has run this long.
 const BUSY_AFTER_MS = 300;
 
