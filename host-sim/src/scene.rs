@@ -352,13 +352,10 @@ fn values(vol: &WireVolume) -> Option<crate::info::Summary> {
 /// the picture's frame at: no bytes if it had more (a count of another
 /// frame), to be worked out apart.
 fn recorded(frame: &mut impl SampleSource, counted: u64) -> (Vec<Sample>, Option<usize>) {
-    let mut samples = Vec::new();
-    let Some(counted) = usize::try_from(counted).ok().filter(|&n| n < usize::MAX / 16) else {
-        frame.fill_with(usize::MAX, |s| samples.push(s));
-        return (samples, None);
-    };
-    samples.reserve(counted);
-    let mut mem = vec![0u8; replay_memory(counted)];
+    // No count to size the memory by: none, and nothing is recorded.
+    let counted = usize::try_from(counted).ok().filter(|&n| n < usize::MAX / 16);
+    let mut samples = Vec::with_capacity(counted.unwrap_or(0));
+    let mut mem = vec![0u8; counted.map_or(0, replay_memory)];
     let mut kept = Kept::new();
     let mut replay = Replay::new(&mut mem, &mut kept);
     let Some(mut rec) = replay.record(0) else {
@@ -367,7 +364,7 @@ fn recorded(frame: &mut impl SampleSource, counted: u64) -> (Vec<Sample>, Option
     };
     rec.fill_with(frame, usize::MAX, |s| samples.push(s));
     rec.finish(FrameStats::default());
-    let fits = samples.len() <= counted;
+    let fits = counted.is_some_and(|n| samples.len() <= n);
     (samples, fits.then(|| replay.len()))
 }
 

@@ -20,7 +20,7 @@ use super::ContourStats;
 use super::compiled;
 use super::pen::{Placed, Placement, along_in};
 use super::subgrid::DirectionCode;
-use super::sweep::{BLOCK, Sweep};
+use super::sweep::{BLOCK, Classes, Sweep, each_busy};
 use crate::command::{Command, CommandSink};
 
 /// Whether the target has vectors: x86-64, AArch64, WebAssembly built
@@ -71,16 +71,31 @@ impl Batch {
         }
     }
 
-    /// Start a block: no cell yet.
+    /// A block's busy cells (the zero bytes of `m[..n]`, [`each_busy`]),
+    /// each with its corners LL, LR, UR, UL and placement as `cell(k)`
+    /// gives them (none: left out), worked out at `level` ([`Batch::solve`]).
     #[inline(always)]
-    pub(crate) fn clear(&mut self) {
+    pub(crate) fn gather(
+        &mut self,
+        m: &Classes,
+        n: usize,
+        level: f32,
+        cell: impl Fn(usize) -> Option<([f32; 4], Placement)>,
+    ) {
         self.n = 0;
+        let _ = each_busy::<()>(m, n, |k| {
+            if let Some((corners, at)) = cell(k) {
+                self.push(k, corners, at);
+            }
+            Ok(())
+        });
+        self.solve(level);
     }
 
     /// Add cell `k` (below `BLOCK`) with corners LL, LR, UR, UL, placed at
     /// `at`.
     #[inline(always)]
-    pub(crate) fn push(&mut self, k: usize, [a, b, c, d]: [f32; 4], at: Placement) {
+    fn push(&mut self, k: usize, [a, b, c, d]: [f32; 4], at: Placement) {
         let i = self.n;
         let [v0, v1, v2, v3, _] = &mut self.v;
         let [x0, x1, y0, y1] = &mut self.sides;
@@ -99,7 +114,7 @@ impl Batch {
 
     /// Work out every cell's centre, key and crossings at `level`.
     #[inline(always)]
-    pub(crate) fn solve(&mut self, level: f32) {
+    fn solve(&mut self, level: f32) {
         let n = self.n.min(LANES);
         let [va, vb, vc, vd, ve] = &mut self.v;
         let cells = first(va, n).iter().zip(first(vb, n)).zip(first(vc, n)).zip(first(vd, n));
@@ -249,6 +264,12 @@ impl Sweep<'_> {
     #[inline(always)]
     pub(crate) fn batched(&self) -> bool {
         VECTORS && self.levels.len() == 1 && self.traversal == super::trace::Traversal::Compiled
+    }
+
+    /// The level of a batched sweep (its one level).
+    #[inline(always)]
+    pub(crate) fn level(&self) -> f32 {
+        self.levels.first().copied().unwrap_or(0.0)
     }
 }
 

@@ -214,52 +214,39 @@ pub fn contour_slab<T: Voxel, S: SurfaceSink>(
                             )
                             .map_err(ContourError::Sink)?;
                     }
-                    if h1_in && sweep.batched() {
+                    if h1_in {
                         and_across(m, [c0, c1, c2, c3], ys);
-                        let batch = &mut scratch.batch;
-                        batch.clear();
+                        // Cell `k` lies in the y-z slice at x0 + k, with
+                        // corners (y, z), (y + 1, z), (y + 1, z + 1), (y, z + 1).
                         let at = Placement::new(y, z);
-                        let _ = each_busy::<()>(m, ys, |k| {
-                            if let (Some(&a), Some(&b), Some(&c), Some(&d)) =
-                                (l0.get(k), l1.get(k), h1.get(k), h0.get(k))
-                            {
-                                batch.push(k, [a, b, c, d], at);
-                            }
-                            Ok(())
-                        });
-                        batch.solve(sweep.levels.first().copied().unwrap_or(0.0));
-                        batch
-                            .each(|i, k, corners, program| {
-                                let slice = SliceId { plane: Plane::YZ, index: x0 + k };
-                                let fx = (x0 + k) as f32;
-                                let place = |u, v| Plane::YZ.to_voxel(fx, u, v);
-                                let to = &mut SliceSink { sink: &mut *sink, slice };
+                        let corners = |k: usize| match (l0.get(k), l1.get(k), h1.get(k), h0.get(k)) {
+                            (Some(&a), Some(&b), Some(&c), Some(&d)) => Some([a, b, c, d]),
+                            _ => None,
+                        };
+                        let slice = |k: usize| SliceId { plane: Plane::YZ, index: x0 + k };
+                        let place = |k: usize| {
+                            let fx = (x0 + k) as f32;
+                            move |u, v| Plane::YZ.to_voxel(fx, u, v)
+                        };
+                        if sweep.batched() {
+                            let batch = &mut scratch.batch;
+                            batch.gather(m, ys, sweep.level(), |k| Some((corners(k)?, at)));
+                            batch.each(|i, k, corners, program| {
+                                let to = &mut SliceSink { sink: &mut *sink, slice: slice(k) };
                                 match program {
-                                    Some(p) => batch.draw(i, p, &place, to, &mut stats),
-                                    None => sweep.cell(corners, at, &place, to, &mut stats),
+                                    Some(p) => batch.draw(i, p, &place(k), to, &mut stats),
+                                    None => sweep.cell(corners, at, &place(k), to, &mut stats),
                                 }
                             })
-                            .map_err(ContourError::Sink)?;
-                    } else if h1_in {
-                        and_across(m, [c0, c1, c2, c3], ys);
-                        each_busy(m, ys, |k| {
-                            let (Some(&a), Some(&b), Some(&c), Some(&d)) =
-                                (l0.get(k), l1.get(k), h1.get(k), h0.get(k))
-                            else {
-                                return Ok(());
-                            };
-                            let slice = SliceId { plane: Plane::YZ, index: x0 + k };
-                            let fx = (x0 + k) as f32;
-                            let place = |u, v| Plane::YZ.to_voxel(fx, u, v);
-                            let at = Placement::new(y, z);
-                            sweep.cell(
-                                [a, b, c, d],
-                                at,
-                                &place,
-                                &mut SliceSink { sink: &mut *sink, slice },
-                                &mut stats,
-                            )
-                        })
+                        } else {
+                            each_busy(m, ys, |k| match corners(k) {
+                                Some(c) => {
+                                    let to = &mut SliceSink { sink: &mut *sink, slice: slice(k) };
+                                    sweep.cell(c, at, &place(k), to, &mut stats)
+                                }
+                                None => Ok(()),
+                            })
+                        }
                         .map_err(ContourError::Sink)?;
                     }
                 }

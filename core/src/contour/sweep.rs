@@ -341,30 +341,20 @@ impl<'l> Sweep<'l> {
     ) -> Result<(), S::Error> {
         let cells = lower.len().min(upper.len()).min(BLOCK + 1).saturating_sub(1);
         and_along(m, lo, up, cells);
+        let corners = |k: usize| match (lower.get(k), lower.get(k + 1), upper.get(k + 1), upper.get(k)) {
+            (Some(&a), Some(&b), Some(&c), Some(&d)) => Some([a, b, c, d]),
+            _ => None,
+        };
         if self.batched() {
-            let batch = &mut *batch;
-            batch.clear();
-            let _ = each_busy::<()>(m, cells, |k| {
-                if let (Some(&a), Some(&b), Some(&c), Some(&d)) =
-                    (lower.get(k), lower.get(k + 1), upper.get(k + 1), upper.get(k))
-                {
-                    batch.push(k, [a, b, c, d], at(k));
-                }
-                Ok(())
-            });
-            batch.solve(self.levels.first().copied().unwrap_or(0.0));
+            batch.gather(m, cells, self.level(), |k| Some((corners(k)?, at(k))));
             return batch.each(|i, k, corners, program| match program {
                 Some(p) => batch.draw(i, p, &|x, y| place(k, x, y), sink, stats),
                 None => self.cell(corners, at(k), &|x, y| place(k, x, y), sink, stats),
             });
         }
-        each_busy(m, cells, |k| {
-            let (Some(&a), Some(&b), Some(&c), Some(&d)) =
-                (lower.get(k), lower.get(k + 1), upper.get(k + 1), upper.get(k))
-            else {
-                return Ok(());
-            };
-            self.cell([a, b, c, d], at(k), &|x, y| place(k, x, y), sink, stats)
+        each_busy(m, cells, |k| match corners(k) {
+            Some(c) => self.cell(c, at(k), &|x, y| place(k, x, y), sink, stats),
+            None => Ok(()),
         })
     }
 
