@@ -28,7 +28,7 @@ const HALF: usize = 512;
 
 /// The firmware's engine memory: 32 KB slices, 128-sample rows, 8192
 /// points a surface.
-type Mem = StaticBuffers<{ 32 * 1024 }, 128, { Geometry::bytes_for(8192) }>;
+type Mem = StaticBuffers<{ 32 * 1024 }, { Geometry::bytes_for(8192) }>;
 
 fn engine(mem: &mut Mem) -> Engine<'_> {
     Engine::new(EngineConfig::default(), mem.buffers()).expect("engine")

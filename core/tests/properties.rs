@@ -26,7 +26,7 @@ use isoscope_core::contour::pen::Placement;
 use isoscope_core::contour::subgrid::Subgrid;
 use isoscope_core::contour::surface::{SliceId, SurfaceSink, contour_volume};
 use isoscope_core::contour::trace::Traversal;
-use isoscope_core::contour::{ContourError, ContourStats, RowContourer, contour_grid, contour_subgrid};
+use isoscope_core::contour::{ContourError, ContourStats, contour_grid, contour_subgrid};
 use proptest::prelude::*;
 use proptest::sample::Index;
 use std::collections::{BTreeMap, BTreeSet};
@@ -472,36 +472,6 @@ proptest! {
                 .collect();
             prop_assert_eq!(grid, cells, "level #{} = {}", l, r.levels[l]);
         }
-    }
-
-    /// `RowContourer` fed the rows of a grid one pair at a time, with
-    /// `next_row` (the classes of the last upper row kept) or `row` as the
-    /// pattern says, draws exactly what `contour_grid` draws, rows longer
-    /// than a block of the sweep included.
-    #[test]
-    fn row_contourer_draws_the_grid_whichever_rows_follow(
-        (nx, ny, vals) in (1usize..=140, 1usize..=5)
-            .prop_flat_map(|(nx, ny)| (Just(nx), Just(ny), f32_samples(nx * ny))),
-        specs in prop::collection::vec(level_spec(), 1..=3),
-        follows in prop::collection::vec(any::<bool>(), 5),
-    ) {
-        let levels = resolve(&specs, &vals);
-        let grid = Grid2::new(&vals[..], nx, ny).unwrap();
-        let (mut want, mut got) = (Log::default(), Log::default());
-        let want_stats = contour_grid(&grid, &levels, Traversal::Compiled, Point2::new, &mut want).unwrap();
-        let mut rc = RowContourer::new::<Infallible>(&levels, Traversal::Compiled).unwrap();
-        let mut stats = ContourStats::default();
-        for j in 0..ny.saturating_sub(1) {
-            let (lower, upper) = (&vals[j * nx..(j + 1) * nx], &vals[(j + 1) * nx..(j + 2) * nx]);
-            if j > 0 && follows[j] {
-                rc.next_row(lower, upper, j, Point2::new, &mut got, &mut stats).unwrap();
-            } else {
-                rc.row(lower, upper, j, Point2::new, &mut got, &mut stats).unwrap();
-            }
-        }
-        let all = |l: &Log| l.0.iter().map(|(li, c)| (*li, bits(c))).collect::<Vec<_>>();
-        prop_assert_eq!(all(&got), all(&want));
-        prop_assert_eq!(stats, want_stats);
     }
 
     /// b. Every emitted point lies on an edge of its subgrid (a border edge,

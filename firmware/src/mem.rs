@@ -2,14 +2,14 @@
 //! between SRAM and the core-coupled memory, lent once to the one
 //! [`Engine`]. A change of `Buffers`' shape stays in this module.
 //!
-//! Sizes ([`isoscope_scene`]: `S` = [`SLICE_BYTES`], `E` = [`EXTENT`],
+//! Sizes ([`isoscope_scene`]: `S` = [`SLICE_BYTES`],
 //! `P` = [`isoscope_scene::POINTS`]):
 //!
 //! | buffer | bytes | where |
 //! |---|---|---|
 //! | slices, twice (the stitching and ordering scratch between volumes) | `2 S` = 64 KB | CCM |
 //! | two surfaces: points (6 B) and their kinds (2 bits) | `12.5 P` = 102,400 | SRAM |
-//! | rows, twice (`f32`) | `8 E` = 1 KB | SRAM |
+//! | the rows around the cells being contoured ([`RowMemory`]) | 2.9 KB | SRAM |
 //!
 //! The CCM (64 KB at 0x1000_0000) is reachable by the CPU only, which is
 //! all the engine needs; the DMA buffers of the output path stay in SRAM.
@@ -24,8 +24,8 @@
 
 use core::mem::MaybeUninit;
 use core::sync::atomic::{AtomicBool, Ordering};
-use isoscope_core::engine::{Buffers, Engine, EngineError};
-use isoscope_scene::{EXTENT, SLICE_BYTES, SURFACE_BYTES, engine_config};
+use isoscope_core::engine::{Buffers, Engine, EngineError, RowMemory};
+use isoscope_scene::{SLICE_BYTES, SURFACE_BYTES, engine_config};
 
 /// The slices, in the core-coupled memory (in SRAM under QEMU).
 struct Ccm {
@@ -35,7 +35,7 @@ struct Ccm {
 /// The rest, in SRAM (.bss, zeroed by cortex-m-rt).
 struct Sram {
     surfaces: [[u8; SURFACE_BYTES]; 2],
-    rows: [[f32; EXTENT]; 2],
+    rows: RowMemory,
 }
 
 /// Bytes of engine memory in the CCM (in SRAM under QEMU).
@@ -48,7 +48,7 @@ const _: () = assert!(CCM_BYTES <= 64 * 1024, "the CCM holds 64 KB");
 #[cfg_attr(not(feature = "qemu"), unsafe(link_section = ".ccmram"))]
 static mut CCM: MaybeUninit<Ccm> = MaybeUninit::uninit();
 
-static mut SRAM: Sram = Sram { surfaces: [[0; SURFACE_BYTES]; 2], rows: [[0.0; EXTENT]; 2] };
+static mut SRAM: Sram = Sram { surfaces: [[0; SURFACE_BYTES]; 2], rows: RowMemory::new() };
 
 /// The engine itself (its frame decoder, answer and event queues), in
 /// SRAM rather than on the stack.
@@ -78,8 +78,7 @@ pub fn engine() -> Option<Result<&'static mut Engine<'static>, EngineError>> {
         (ccm.assume_init_mut(), &mut *core::ptr::addr_of_mut!(SRAM))
     };
     let [front, back] = &mut sram.surfaces;
-    let [r0, r1] = &mut sram.rows;
-    let buffers = Buffers { slices: &mut ccm.slices, rows: [r0, r1], front, back, scratch: &mut [] };
+    let buffers = Buffers { slices: &mut ccm.slices, rows: &mut sram.rows, front, back, scratch: &mut [] };
     Some(Engine::new(engine_config(), buffers).map(|engine| {
         // SAFETY: reached once (TAKEN): the only reference to ENGINE.
         unsafe { (*core::ptr::addr_of_mut!(ENGINE)).write(engine) }

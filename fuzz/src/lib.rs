@@ -157,4 +157,4 @@ pub fn reference_precheck(frame: &[u8]) -> Result<(), WireError> {
 /// points in each surface (no extra scratch: the slices are it, as on the
 /// MCU).
 pub type EngineMem =
-    isoscope_core::engine::StaticBuffers<1024, 32, { isoscope_core::engine::Geometry::bytes_for(4096) }>;
+    isoscope_core::engine::StaticBuffers<1024, { isoscope_core::engine::Geometry::bytes_for(4096) }>;

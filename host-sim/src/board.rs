@@ -13,17 +13,17 @@
 use crate::link::{SendConfig, WireVolume, volume_messages};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
-use isoscope_core::engine::{Buffers, Capacity, Engine, EngineConfig, Event, Geometry};
+use isoscope_core::engine::{Buffers, Capacity, Engine, EngineConfig, Event, Geometry, RowMemory};
 use isoscope_core::view::View;
 use isoscope_core::wire::{Levels, MAX_LEVELS, Message, NackCode, PROTOCOL_VERSION};
 use std::mem::ManuallyDrop;
 use std::ptr::NonNull;
 
 /// The engine's memory on the heap.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct HostBuffers {
     slices: Vec<u8>,
-    rows: Vec<f32>,
+    rows: Box<RowMemory>,
     surfaces: Vec<u8>,
     scratch: Vec<u8>,
 }
@@ -33,7 +33,7 @@ impl HostBuffers {
     pub fn new(capacity: &Capacity) -> Self {
         Self {
             slices: vec![0; 2 * capacity.slice_bytes],
-            rows: vec![0.0; 2 * capacity.extent],
+            rows: Box::default(),
             surfaces: vec![0; 2 * Geometry::bytes_for(capacity.points)],
             scratch: vec![0; capacity.scratch_bytes],
         }
@@ -104,7 +104,7 @@ impl Drop for OwnedBoard {
 
 /// Room on the host for `points` points a surface, with the scratch to
 /// stitch and order them all (8 bytes a point), for slices of `slice_bytes`
-/// and rows of `extent`.
+/// (volumes fitted to rows of `extent`).
 pub fn host_capacity(slice_bytes: usize, extent: usize, points: usize) -> Capacity {
     Capacity { slice_bytes, extent, points, scratch_bytes: 8 * points }
 }

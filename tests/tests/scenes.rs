@@ -46,8 +46,8 @@ fn check(s: &Scene, max_ratio: f32) {
 fn hydrogen_32_is_drawn_whole_on_the_board() {
     let (host, board) = (demo(Demo::Hydrogen, 32, Memory::Host), demo(Demo::Hydrogen, 32, F407));
     // The board stitches its pieces as they come, when its back fills:
-    // what is left for the commit is 890 polylines and pieces.
-    assert_eq!((host.chain.fragments, board.chain.fragments), (3728, 890));
+    // what is left for the commit is 897 polylines and pieces.
+    assert_eq!((host.chain.fragments, board.chain.fragments), (3728, 897));
     for s in [&host, &board] {
         assert!(s.loaded.whole(), "{:?}", s.loaded);
         assert!(s.remarks().is_empty(), "{:?}", s.remarks());
@@ -58,9 +58,11 @@ fn hydrogen_32_is_drawn_whole_on_the_board() {
     // The slices' loops cross at shared points: drawn inside one another,
     // a polyline a lobe.
     assert_eq!(board.polylines, 4);
-    check(&host, 0.0232);
-    // (0.0231 when it stitched all its pieces at once: stitched as they
-    // come, a few more loops end apart.)
+    // (The host stitches all its pieces at once, in the order the slab
+    // rows give them, and one loop is left unspliced: five polylines, and
+    // 0.0232 when the pieces came plane by plane. Which loops are spliced
+    // where they touch follows the order of the pieces.)
+    check(&host, 0.0296);
     check(&board, 0.0253);
 }
 
@@ -86,7 +88,8 @@ fn gyroid_48_is_whole_on_the_host_and_thinned_on_the_board() {
 fn brain_mri_holds_its_blank_figure() {
     let host = brain(Memory::Host);
     assert!(host.loaded.whole());
-    check(&host, 0.0491);
+    // (0.0491 when the pieces came plane by plane: see the hydrogen scene.)
+    check(&host, 0.0509);
     let board = brain(F407);
     // Thinned to its coarsest (every 64th slice from the middle), still a
     // little too large: the rest is dropped, and said to be.

@@ -30,6 +30,7 @@ mod batch;
 pub mod compiled;
 pub mod grid;
 pub mod pen;
+pub(crate) mod slab;
 pub mod subgrid;
 pub mod surface;
 mod sweep;
@@ -40,12 +41,11 @@ pub mod voxel;
 pub use voxel::Voxel;
 
 use crate::command::{Command, CommandSink};
-use batch::Batch;
 use core::ops::Range;
 use grid::{Grid2, GridError};
 use pen::{Pen, Placed, Placement};
 use subgrid::Subgrid;
-use sweep::{BLOCK, Classes, Scratch, Sweep, lane};
+use sweep::{BLOCK, Scratch, Sweep, lane};
 use trace::{Conn, Crossing, Traversal, visit};
 use tree::Template;
 
@@ -212,135 +212,6 @@ pub fn contour_subgrid<P, S: CommandSink<P>>(
         placed.finish(&mut send)?;
     }
     Ok(sent)
-}
-
-/// Contours one row of cells at a time from rows of samples already
-/// widened to `f32`: the streaming path, where the grid is never whole in
-/// memory (the device engine decodes two rows, contours, moves on).
-///
-/// Cell `i` of row `j` has the corners `lower[i], lower[i + 1]` (at grid
-/// row `j`) and `upper[i], upper[i + 1]` (row `j + 1`), and sits at
-/// `(i, j)`: the commands, and every coordinate, are bit-identical to those
-/// [`contour_grid`] draws for the same cells of a whole grid.
-///
-/// Fed consecutive rows of one grid, [`RowContourer::next_row`] classes
-/// only the new upper row: the lower one's classes are those it kept of the
-/// previous call's upper row.
-#[derive(Debug)]
-pub struct RowContourer<'l> {
-    sweep: Sweep<'l>,
-    /// Two rows' classes (the lower and upper, or the other way round:
-    /// `flip`), and scratch.
-    classes: [Classes; 3],
-    batch: Batch,
-    flip: bool,
-    /// Samples of the previous call's upper row whose classes are kept
-    /// (0 when none are: the row had no cell, or took more than a block).
-    kept: usize,
-}
-
-impl<'l> RowContourer<'l> {
-    /// A contourer for `levels`.
-    ///
-    /// # Errors
-    /// [`ContourError::NonFiniteLevel`].
-    pub fn new<E>(levels: &'l [f32], traversal: Traversal) -> Result<Self, ContourError<E>> {
-        check_levels(levels)?;
-        Ok(Self {
-            sweep: Sweep::new(levels, traversal),
-            classes: [[0; BLOCK + 9]; 3],
-            batch: Batch::new(),
-            flip: false,
-            kept: 0,
-        })
-    }
-
-    /// Contour the cells between the sample rows `lower` (grid row `j`) and
-    /// `upper` (row `j + 1`); the shorter row sets the length. Points are
-    /// placed by `place(x, y)` from grid coordinates; `stats` adds up.
-    ///
-    /// # Errors
-    /// The sink's error.
-    pub fn row<P, S: CommandSink<P>>(
-        &mut self,
-        lower: &[f32],
-        upper: &[f32],
-        j: usize,
-        place: impl Fn(f32, f32) -> P,
-        sink: &mut S,
-        stats: &mut ContourStats,
-    ) -> Result<(), S::Error> {
-        let nx = lower.len().min(upper.len());
-        self.kept = if (2..=BLOCK + 1).contains(&nx) { nx } else { 0 };
-        // Classes in their first places (a fixed place costs no select).
-        self.flip = false;
-        let mut i0 = 0;
-        while i0 + 1 < nx {
-            let n = (nx - 1 - i0).min(BLOCK);
-            let r0 = lower.get(i0..=i0 + n).unwrap_or(&[]);
-            let r1 = upper.get(i0..=i0 + n).unwrap_or(&[]);
-            let at = |k| Placement::new(i0 + k, j);
-            let [lo, up, m] = &mut self.classes;
-            self.sweep.run_rows(
-                r0,
-                r1,
-                [lo, up, m],
-                &mut self.batch,
-                at,
-                |_, x, y| place(x, y),
-                sink,
-                stats,
-            )?;
-            i0 += n;
-        }
-        stats.cells += nx.saturating_sub(1) as u64;
-        Ok(())
-    }
-
-    /// As [`RowContourer::row`], where `lower` holds the same samples as
-    /// the previous call's `upper` (the next row of the same grid): their
-    /// classes, kept from that call, are not worked out again (a row of up
-    /// to 129 samples, one block; a longer one is classed anew). The caller
-    /// vouches for the samples: the commands of other ones may be wrong,
-    /// though nothing panics.
-    ///
-    /// # Errors
-    /// The sink's error.
-    pub fn next_row<P, S: CommandSink<P>>(
-        &mut self,
-        lower: &[f32],
-        upper: &[f32],
-        j: usize,
-        place: impl Fn(f32, f32) -> P,
-        sink: &mut S,
-        stats: &mut ContourStats,
-    ) -> Result<(), S::Error> {
-        let nx = lower.len().min(upper.len());
-        if self.kept == 0 || self.kept != nx {
-            return self.row(lower, upper, j, place, sink, stats);
-        }
-        let (lower, upper) = (lower.get(..nx).unwrap_or(&[]), upper.get(..nx).unwrap_or(&[]));
-        // The kept upper classes become the lower ones.
-        self.flip = !self.flip;
-        let sweep = self.sweep;
-        let [a, b, m] = &mut self.classes;
-        let [lo, up] = if self.flip { [b, a] } else { [a, b] };
-        sweep.classify(upper, up);
-        let at = |k| Placement::new(k, j);
-        sweep.run_classed(
-            lower,
-            upper,
-            [lo, up],
-            m,
-            &mut self.batch,
-            at,
-            |_, x, y| place(x, y),
-            sink,
-            stats,
-        )?;
-        stats.cells += nx.saturating_sub(1) as u64;
-        Ok(())
-    }
 }
 
 /// Contour every subgrid of `grid` at every level, in row order (`j`, then

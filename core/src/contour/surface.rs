@@ -6,12 +6,12 @@
 //! x-y, x-z and y-z contours meet exactly.
 
 use super::grid::{Plane, Planes, Volume};
-use super::pen::Placement;
-use super::sweep::{BLOCK, Scratch, Sweep, and_across, each_busy, lane, quiet_bits};
+use super::slab::{Cut, Every, Lane, Rows, Slab, SlabMemory, SliceSink};
+use super::sweep::lane;
 use super::trace::Traversal;
 use super::voxel::Voxel;
 use super::{ContourError, ContourStats, check_levels, contour_grid};
-use crate::command::{Command, CommandSink, Point3};
+use crate::command::{Command, Point3};
 use core::ops::Range;
 
 /// One slice of a volume.
@@ -45,19 +45,6 @@ impl<S: SurfaceSink + ?Sized> SurfaceSink for &mut S {
     }
 }
 
-struct SliceSink<'s, S> {
-    sink: &'s mut S,
-    slice: SliceId,
-}
-
-impl<S: SurfaceSink> CommandSink<Point3> for SliceSink<'_, S> {
-    type Error = S::Error;
-    #[inline(always)]
-    fn command(&mut self, level: usize, command: Command<Point3>) -> Result<(), S::Error> {
-        self.sink.command(self.slice, level, command)
-    }
-}
-
 /// Contour one slice of a volume at every level.
 ///
 /// # Errors
@@ -78,22 +65,15 @@ pub fn contour_slice<T: Voxel, S: SurfaceSink>(
 }
 
 /// Blocks of a row whose classes [`contour_slab`] keeps from one row to
-/// the next: rows of up to `HELD * BLOCK + 1` samples (1025) are classed
-/// twice, not four times (9 x 4 x 137 bytes of stack: the slab is the
-/// host's; the board contours row by row).
-const HELD: usize = 8;
+/// the next, and one more: rows of up to `(SETS - 1) * BLOCK + 1` samples
+/// (1025) are classed twice, not four times (9 x 4 x 137 bytes of stack).
+const SETS: usize = 9;
 
 /// Contour the z-slab `zs` of every slice of `planes` at every level: the
 /// x-y slices `z` and the x-z and y-z cell rows `z` (the cells between the
 /// x-y slices `z` and `z + 1`) for `z` in `zs`, all three planes at once,
-/// in memory order.
-///
-/// For each `z` and each row `y` it reads the four sample rows around it
-/// (`y` and `y + 1` of slices `z` and `z + 1`), contiguous in x, classes
-/// each sample once ([`super::sweep`]), and finds the cells no level meets
-/// in all three planes from those classes: the x-y cells of row `y`, the
-/// x-z cells of row `z` of slice `y`, and the y-z cells `(y, z)` of every
-/// slice `x`. Within each slice commands come in row-major cell order,
+/// in memory order, row by row ([`super::slab`]: each sample is classed
+/// once a slab). Within each slice commands come in row-major cell order,
 /// exactly as [`contour_slice`] gives them, so splitting a volume into
 /// slabs and joining each slice's commands slab by slab reproduces the
 /// slice; across slices they interleave.
@@ -112,163 +92,53 @@ pub fn contour_slab<T: Voxel, S: SurfaceSink>(
     check_levels(levels)?;
     let (nx, ny, nz) = volume.dims();
     let zs = zs.start..zs.end.min(nz);
-    let (xy, xz, yz) = (planes.contains(Plane::XY), planes.contains(Plane::XZ), planes.contains(Plane::YZ));
-    let data = volume.data();
-    let sweep = Sweep::new(levels, traversal);
+    let cut = Cut {
+        xy: planes.contains(Plane::XY),
+        xz: planes.contains(Plane::XZ),
+        yz: if planes.contains(Plane::YZ) { Every::ALL } else { Every::NONE },
+    };
     let mut stats = ContourStats::default();
-    let mut scratch = Scratch::new();
-    // The classes of the four rows of each of the first `HELD` blocks of a
-    // row, kept from one `y` to the next: rows (y + 1, z) and (y + 1, z + 1)
-    // of one `y` are rows (y, z) and (y, z + 1) of the next, so a sample is
-    // classed twice a `z`, not four times. Later blocks (a row longer than
-    // `HELD * BLOCK + 1` samples) share the last set and class every row.
-    let mut held = [[[0u8; BLOCK + 9]; 4]; HELD + 1];
-    let row = |y: usize, z: usize| (z * ny + y) * nx;
-    // The needed rows of a block, beside (y, z): (y + 1, z) for the x-y or
-    // y-z cells, (y, z + 1) for the x-z or y-z cells, (y + 1, z + 1) for
-    // the y-z cells.
-    let (need_l1, need_h0) = (xy || yz, xz || yz);
-    for z in zs.clone() {
-        let up = z + 1 < nz;
-        let fz = z as f32;
-        // The `y` whose rows (y, z) and (y, z + 1) each held set has
-        // classed (none yet this `z`).
-        let mut held_for = [[usize::MAX; 2]; HELD + 1];
+    let mut mem = SlabMemory::<SETS>::new();
+    let mut slab = Slab::new(levels, traversal, &mut mem);
+    for z in zs {
         for y in 0..ny {
-            let right = y + 1 < ny;
-            let (l1_in, h0_in, h1_in) = (right && need_l1, up && need_h0, right && up && yz);
-            let mut x0 = 0;
-            let mut block = 0;
-            while x0 < nx {
-                // Samples x0..=x1 (cells x0..x1 of x-y and x-z rows; y-z
-                // slices x0..x1, the last block's up to nx).
-                let x1 = (x0 + BLOCK).min(nx - 1);
-                let n = x1 + 1 - x0;
-                let ys = if x1 + 1 == nx { n } else { n - 1 };
-                let slot = block.min(HELD);
-                block += 1;
-                let (Some([c0, c1, c2, c3]), Some(classed)) = (held.get_mut(slot), held_for.get_mut(slot))
-                else {
-                    break;
-                };
-                let [b0, b1, b2, b3] = &mut scratch.bufs;
-                let [m, ..] = &mut scratch.classes;
-                // Rows (y, z), (y + 1, z), (y, z + 1), (y + 1, z + 1).
-                let l0 = lane(data, row(y, z) + x0, 1, n, b0);
-                let l1 = if l1_in { lane(data, row(y + 1, z) + x0, 1, n, b1) } else { &[] };
-                let h0 = if h0_in { lane(data, row(y, z + 1) + x0, 1, n, b2) } else { &[] };
-                let h1 = if h1_in { lane(data, row(y + 1, z + 1) + x0, 1, n, b3) } else { &[] };
-                if classed[0] != y {
-                    sweep.classify(l0, c0);
-                }
-                if l1_in {
-                    sweep.classify(l1, c1);
-                }
-                if h0_in && classed[1] != y {
-                    sweep.classify(h0, c2);
-                }
-                if h1_in {
-                    sweep.classify(h1, c3);
-                }
-                // A block whose samples share a class meets no level in any
-                // plane: nothing to scan (the skip path's common case).
-                let shared = quiet_bits(c0, n)
-                    & (if l1_in { quiet_bits(c1, n) } else { !0 })
-                    & (if h0_in { quiet_bits(c2, n) } else { !0 })
-                    & (if h1_in { quiet_bits(c3, n) } else { !0 });
-                if shared == 0 {
-                    if xy && right {
-                        let place = |_, u, v| Plane::XY.to_voxel(fz, u, v);
-                        let mut to =
-                            SliceSink { sink: &mut *sink, slice: SliceId { plane: Plane::XY, index: z } };
-                        sweep
-                            .run_classed(
-                                l0,
-                                l1,
-                                [c0, c1],
-                                m,
-                                &mut scratch.batch,
-                                |k| Placement::new(x0 + k, y),
-                                place,
-                                &mut to,
-                                &mut stats,
-                            )
-                            .map_err(ContourError::Sink)?;
-                    }
-                    if xz && up {
-                        let fy = y as f32;
-                        let place = |_, u, v| Plane::XZ.to_voxel(fy, u, v);
-                        let mut to =
-                            SliceSink { sink: &mut *sink, slice: SliceId { plane: Plane::XZ, index: y } };
-                        sweep
-                            .run_classed(
-                                l0,
-                                h0,
-                                [c0, c2],
-                                m,
-                                &mut scratch.batch,
-                                |k| Placement::new(x0 + k, z),
-                                place,
-                                &mut to,
-                                &mut stats,
-                            )
-                            .map_err(ContourError::Sink)?;
-                    }
-                    if h1_in {
-                        and_across(m, [c0, c1, c2, c3], ys);
-                        // Cell `k` lies in the y-z slice at x0 + k, with
-                        // corners (y, z), (y + 1, z), (y + 1, z + 1), (y, z + 1).
-                        let at = Placement::new(y, z);
-                        let corners = |k: usize| match (l0.get(k), l1.get(k), h1.get(k), h0.get(k)) {
-                            (Some(&a), Some(&b), Some(&c), Some(&d)) => Some([a, b, c, d]),
-                            _ => None,
-                        };
-                        let slice = |k: usize| SliceId { plane: Plane::YZ, index: x0 + k };
-                        let place = |k: usize| {
-                            let fx = (x0 + k) as f32;
-                            move |u, v| Plane::YZ.to_voxel(fx, u, v)
-                        };
-                        if sweep.batched() {
-                            let batch = &mut scratch.batch;
-                            batch.gather(m, ys, sweep.level(), |k| Some((corners(k)?, at)));
-                            batch.each(|i, k, corners, program| {
-                                let to = &mut SliceSink { sink: &mut *sink, slice: slice(k) };
-                                match program {
-                                    Some(p) => batch.draw(i, p, &place(k), to, &mut stats),
-                                    None => sweep.cell(corners, at, &place(k), to, &mut stats),
-                                }
-                            })
-                        } else {
-                            each_busy(m, ys, |k| match corners(k) {
-                                Some(c) => {
-                                    let to = &mut SliceSink { sink: &mut *sink, slice: slice(k) };
-                                    sweep.cell(c, at, &place(k), to, &mut stats)
-                                }
-                                None => Ok(()),
-                            })
-                        }
-                        .map_err(ContourError::Sink)?;
-                    }
-                }
-                // This `y`'s rows y + 1 are the next one's rows y.
-                if slot < HELD {
-                    if l1_in {
-                        core::mem::swap(c0, c1);
-                        classed[0] = y + 1;
-                    }
-                    if h1_in {
-                        core::mem::swap(c2, c3);
-                        classed[1] = y + 1;
-                    }
-                }
-                x0 = if x1 + 1 == nx { nx } else { x1 };
-            }
+            let at = [(y, z), (y + 1, z), (y, z + 1), (y + 1, z + 1)].map(|(y, z)| (z * ny + y) * nx);
+            let rows = VolumeRows { data: volume.data(), at };
+            slab.row(&rows, [nx, ny], y, z, z + 1 < nz, cut, sink, &mut stats).map_err(ContourError::Sink)?;
         }
-        stats.cells += (u64::from(xy) * ((nx - 1) * (ny - 1)) as u64)
-            + u64::from(up)
-                * (u64::from(xz) * (ny * (nx - 1)) as u64 + u64::from(yz) * (nx * (ny - 1)) as u64);
     }
     Ok(stats)
+}
+
+/// A slab row's samples in a volume in memory: where each of its four rows
+/// starts in `data` (rows past the end are never `need`ed).
+struct VolumeRows<'d, T> {
+    data: &'d [T],
+    at: [usize; 4],
+}
+
+impl<T: Voxel> Rows for VolumeRows<'_, T> {
+    const KEEPS: bool = false;
+
+    #[inline(always)]
+    fn lanes<'b>(
+        &'b self,
+        x0: usize,
+        n: usize,
+        need: [bool; 4],
+        _fill: [bool; 4],
+        [b0, b1, b2, b3]: [&'b mut Lane; 4],
+    ) -> [&'b [f32]; 4] {
+        // (Each row needed is borrowed or widened anew: volumes in memory
+        // are mostly `f32`.)
+        let [a0, a1, a2, a3] = self.at;
+        let [n0, n1, n2, n3] = need;
+        let data = self.data;
+        let at = |on: bool, start: usize, buf: &'b mut Lane| -> &'b [f32] {
+            if on { lane(data, start + x0, 1, n, buf) } else { &[] }
+        };
+        [at(n0, a0, b0), at(n1, a1, b1), at(n2, a2, b2), at(n3, a3, b3)]
+    }
 }
 
 /// Contour every slice of every plane in `planes` at every level: the
@@ -290,13 +160,13 @@ pub fn contour_volume<T: Voxel, S: SurfaceSink>(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::contour::sweep::BLOCK;
 
     /// Keeps every command with its slice, as bits.
     #[derive(Default)]
-    struct Keep(Vec<(SliceId, usize, u8, [u32; 3])>);
+    pub(crate) struct Keep(pub(crate) Vec<(SliceId, usize, u8, [u32; 3])>);
 
     impl SurfaceSink for Keep {
         type Error = core::convert::Infallible;
@@ -308,11 +178,11 @@ mod tests {
     }
 
     /// A volume whose rows are longer than the slab keeps classes for
-    /// (`HELD` blocks), with a stretch no level meets (whole quiet blocks,
+    /// (`SETS - 1` blocks), with a stretch no level meets (whole quiet blocks,
     /// one with a NaN), samples exactly at a level, and a ragged last
     /// block.
     fn long_rows() -> (Vec<f32>, [usize; 3]) {
-        let (nx, ny, nz) = (HELD * BLOCK + 1 + 3 * BLOCK / 2, 4, 3);
+        let (nx, ny, nz) = ((SETS - 1) * BLOCK + 1 + 3 * BLOCK / 2, 4, 3);
         let mut h = 0x9E37_79B9u32;
         let mut v = Vec::with_capacity(nx * ny * nz);
         for k in 0..nx * ny * nz {

@@ -13,8 +13,10 @@ pub struct Capacity {
     /// Bytes of one slice buffer (`nx * ny * sample size` of the largest
     /// slice); there are two.
     pub slice_bytes: usize,
-    /// The largest `nx` or `ny` (each of the two rows holds this many
-    /// `f32`).
+    /// The largest `nx` or `ny` a volume is fitted to for this board
+    /// (`isoscope-sim fit`): the engine takes any row its slices hold, but
+    /// a slice of more than this many samples a side is more lines than
+    /// its surfaces hold or its beam draws in a refresh.
     pub extent: usize,
     /// Points each of the two surfaces holds ([`Geometry::bytes_for`]).
     pub points: usize,
@@ -26,7 +28,7 @@ pub struct Capacity {
 impl Capacity {
     /// Bytes of memory these capacities take in all.
     pub const fn bytes(&self) -> usize {
-        2 * self.slice_bytes + 2 * 4 * self.extent + 2 * Geometry::bytes_for(self.points) + self.scratch_bytes
+        2 * self.slice_bytes + 2 * Geometry::bytes_for(self.points) + self.scratch_bytes
     }
 }
 

@@ -68,7 +68,7 @@ impl core::fmt::Display for EngineError {
         match self {
             Self::Beam(e) => write!(f, "invalid beam settings: {e}"),
             Self::View(e) => write!(f, "invalid view: {e}"),
-            Self::Buffers => f.write_str("engine buffers too small (slices or rows)"),
+            Self::Buffers => f.write_str("engine buffers too small (slices)"),
         }
     }
 }

@@ -300,7 +300,7 @@ impl Device<'_> {
                 if self.cfg.sample_types & sample_type.bit() == 0 {
                     return Err(NackCode::Invalid);
                 }
-                spec.check(self.stream.slice_capacity(), self.stream.row_capacity())?;
+                spec.check(self.stream.slice_capacity())?;
                 let shift = Geometry::shift_for(dims);
                 back.reset(shift);
                 self.stream.begin(spec, now_ms, shift);

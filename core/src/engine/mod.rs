@@ -48,7 +48,7 @@ mod stream;
 pub use crate::path::{ChainStats, Commands, Geometry, Kind, Packed};
 use crate::path::{Metric, Pass, Source};
 pub use board::{Board, Capacity};
-pub use buffers::{Buffers, StaticBuffers};
+pub use buffers::{Buffers, RowMemory, StaticBuffers};
 pub use config::{EngineConfig, EngineError};
 use device::{Device, Lend};
 pub use event::{AbortReason, Counters, Event};
@@ -145,7 +145,7 @@ impl<'a> Engine<'a> {
         let back = Geometry::new(back);
         let stream = Stream::new(slices.len(), rows, front.capacity());
         let tail = replay_tail(slices.len());
-        if stream.slice_capacity() < 16 || stream.row_capacity() < 2 {
+        if stream.slice_capacity() < 16 {
             return Err(EngineError::Buffers);
         }
         let display_capacity = front.capacity().min(back.capacity());

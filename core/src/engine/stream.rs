@@ -1,25 +1,33 @@
 //! Streaming contouring: a volume arrives one z slice at a time, and only
 //! two slices (the previous and the current) are ever held.
 //!
-//! When slice `z` is complete, the engine contours the x-y slice `z` and,
-//! between slices `z - 1` and `z`, one row of subgrids of every x-z slice
-//! (one per `y`) and every y-z slice (one per `x`). Together these are all
-//! the subgrids of the whole chicken-wire surface, with commands and
-//! coordinates bit-identical to contouring the whole volume at once
-//! ([`crate::contour::surface::contour_volume`]); only their order differs.
+//! When slice `z` is complete, the engine contours the slab between slices
+//! `z - 1` and `z` ([`crate::contour::slab`]): the x-y slice `z - 1`, and
+//! one row of subgrids of every x-z slice (one per `y`) and every y-z
+//! slice (one per `x`); the last slice adds its own x-y slice. Together
+//! these are all the subgrids of the whole chicken-wire surface, with the
+//! very commands, in the very order, of contouring the whole volume at once
+//! ([`crate::contour::surface::contour_volume`]): the same code, fed from
+//! the two slices held.
 //!
-//! That work is a [`Job`] of rows of subgrids (about `3 n` for an `n x n`
-//! slice), done at once when the slice completes or, deferred, a few rows
-//! at a time ([`Stream::work`], by cells) so that the caller can keep its display
-//! refreshed in between; the next slice's data then waits for the job
-//! (the caller stops feeding), or finishes it first if it comes anyway.
+//! That work is a [`Job`] of slab rows (`n` for an `n x n` slice, each
+//! with the cells of all three planes), done at once when the slice
+//! completes or, deferred, a few rows at a time ([`Stream::work`], by
+//! cells) so that the caller can keep its display refreshed in between;
+//! the next slice's data then waits for the job (the caller stops
+//! feeding), or finishes it first if it comes anyway.
 
-use crate::command::{Command, CommandSink, Point3};
+use super::RowMemory;
+use crate::command::{Command, Point3};
+use crate::contour::grid::Plane;
+use crate::contour::slab::{self, Cut, Every, Lane, Rows, Slab};
+use crate::contour::surface::{SliceId, SurfaceSink};
 use crate::contour::trace::Traversal;
-use crate::contour::{ContourStats, MAX_COMMANDS_A_CELL, RowContourer};
+use crate::contour::{ContourStats, MAX_COMMANDS_A_CELL};
 use crate::path::{self, Geometry, Held, Stride};
 use crate::wire::{AXIS_X, AXIS_Y, AXIS_Z, Levels, NackCode, SampleType};
 use core::convert::Infallible;
+use core::ops::Range;
 
 /// A volume as `BeginVolume` announced it, checked.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -47,8 +55,8 @@ impl VolumeSpec {
     }
 
     /// Check a volume against the buffers: `Invalid` for contents that no
-    /// device takes, `DimsOverCapacity` for a slice or row that does not fit.
-    pub(crate) fn check(&self, slice_capacity: usize, row_capacity: usize) -> Result<(), NackCode> {
+    /// device takes, `DimsOverCapacity` for a slice that does not fit.
+    pub(crate) fn check(&self, slice_capacity: usize) -> Result<(), NackCode> {
         let [nx, ny, nz] = self.dims.map(usize::from);
         let levels_ok = !self.levels.is_empty() && self.levels.as_slice().iter().all(|l| l.is_finite());
         let spacing_ok = self.spacing.iter().all(|s| s.is_finite() && *s > 0.0);
@@ -56,7 +64,7 @@ impl VolumeSpec {
         if nx < 2 || ny < 2 || nz < 1 || !levels_ok || !spacing_ok || !axes_ok {
             return Err(NackCode::Invalid);
         }
-        if self.slice_bytes() > slice_capacity || nx.max(ny) > row_capacity {
+        if self.slice_bytes() > slice_capacity {
             return Err(NackCode::DimsOverCapacity);
         }
         Ok(())
@@ -85,19 +93,12 @@ pub(crate) struct Transfer {
     pub stride: Stride,
 }
 
-/// The planes a [`Job`] contours, in order.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub(crate) enum Phase {
-    /// Rows `j, j + 1` of the x-y slice `z`.
-    Xy,
-    /// Row `z - 1` of subgrids of the x-z slice at `y = j`.
-    Xz,
-    /// Row `z - 1` of subgrids of the y-z slice at `x = i`.
-    Yz,
-}
-
-/// The contouring a completed slice `z` owes: where it stands.
+/// The contouring a completed slice `z` owes: the rows of the slab
+/// between slices `z - 1` and `z`, then, after the last slice, those of
+/// the slab of slice `z` alone (its x-y cells); where it stands. A step
+/// is a row's planes from `plane` on, all of them where the back has room
+/// for all they may yield, else one (the bound the memory is checked
+/// against before each plane).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub(crate) struct Job {
@@ -105,9 +106,12 @@ pub(crate) struct Job {
     z: u16,
     /// The slot holding slice `z` (the other holds `z - 1`).
     slot: usize,
-    phase: Phase,
-    /// The next row (`j`, or `i` in [`Phase::Yz`]).
+    /// The lower slice of the slab at hand (`z - 1`, or `z`).
+    lower: u16,
+    /// The next row (`y`).
     next: u32,
+    /// The next plane of that row: 0 x-y, 1 x-z, 2 y-z.
+    plane: u8,
 }
 
 /// The two slices, the decoded rows and the transfer state.
@@ -131,7 +135,9 @@ pub(crate) struct Job {
 pub(crate) struct Stream<'a> {
     /// Bytes of the whole slice memory.
     capacity: usize,
-    rows: [&'a mut [f32]; 2],
+    /// What contouring keeps from one step of a job to the next (the
+    /// rows' samples and classes).
+    rows: &'a mut RowMemory,
     /// A row waited for the whole slice memory.
     wants_all: bool,
     /// A row waits for the engine to fold the back into the front
@@ -175,10 +181,11 @@ struct Keep<'g, 'a, 's> {
     memory: usize,
     /// The slices in force.
     stride: Stride,
-    /// The slice the commands come from: its axis (0 x for a y-z slice,
-    /// 1 y for an x-z, 2 z for an x-y) and index.
+    /// The slice the last command came from: its axis (0 x for a y-z
+    /// slice, 1 y for an x-z, 2 z for an x-y) and index.
     slice: (usize, u16),
-    /// Whether `stride` keeps that slice (asked once a row, not a command).
+    /// Whether `stride` keeps that slice (asked when the slice changes,
+    /// not each command).
     live: bool,
     /// Commands taken since `poll` was last called.
     since_poll: u8,
@@ -217,10 +224,19 @@ impl Keep<'_, '_, '_> {
     }
 }
 
-impl CommandSink<Point3> for Keep<'_, '_, '_> {
+impl SurfaceSink for Keep<'_, '_, '_> {
     type Error = Infallible;
     #[inline(always)]
-    fn command(&mut self, _level: usize, c: Command<Point3>) -> Result<(), Infallible> {
+    fn command(&mut self, slice: SliceId, _level: usize, c: Command<Point3>) -> Result<(), Infallible> {
+        let axis = match slice.plane {
+            Plane::XY => 2,
+            Plane::XZ => 1,
+            Plane::YZ => 0,
+        };
+        let index = slice.index as u16;
+        if (axis, index) != self.slice {
+            self.enter_slice(axis, index);
+        }
         // A row of a large slice at several levels yields hundreds of
         // commands: a board refills its output between some of them.
         self.since_poll = self.since_poll.wrapping_add(1);
@@ -264,50 +280,99 @@ impl CommandSink<Point3> for Keep<'_, '_, '_> {
     }
 }
 
-/// Samples `start, start + stride, ...` of a slice of little-endian
-/// samples, widened to `f32` into all of `out` (NaN past the end).
-fn decode(ty: SampleType, bytes: &[u8], start: usize, stride: usize, out: &mut [f32]) {
+/// Samples `start, start + 1, ...` of a slice of little-endian samples,
+/// widened to `f32` into all of `out` (NaN past the end).
+fn decode(ty: SampleType, bytes: &[u8], start: usize, out: &mut [f32]) {
     // One loop per type (the type is not asked again per sample).
     match ty {
-        SampleType::U8 => widen::<1>(bytes, start, stride, out, |b| f32::from(b[0])),
-        SampleType::U16 => widen::<2>(bytes, start, stride, out, |b| f32::from(u16::from_le_bytes(b))),
-        SampleType::I16 => widen::<2>(bytes, start, stride, out, |b| f32::from(i16::from_le_bytes(b))),
-        SampleType::F32 => widen::<4>(bytes, start, stride, out, f32::from_le_bytes),
+        SampleType::U8 => widen::<1>(bytes, start, out, |b| f32::from(b[0])),
+        SampleType::U16 => widen::<2>(bytes, start, out, |b| f32::from(u16::from_le_bytes(b))),
+        SampleType::I16 => widen::<2>(bytes, start, out, |b| f32::from(i16::from_le_bytes(b))),
+        SampleType::F32 => widen::<4>(bytes, start, out, f32::from_le_bytes),
     }
 }
 
 /// [`decode`] for samples of `N` bytes.
 #[inline(always)]
-fn widen<const N: usize>(
-    bytes: &[u8],
-    start: usize,
-    stride: usize,
-    out: &mut [f32],
-    from: impl Fn([u8; N]) -> f32,
-) {
+fn widen<const N: usize>(bytes: &[u8], start: usize, out: &mut [f32], from: impl Fn([u8; N]) -> f32) {
     let samples = bytes.as_chunks::<N>().0.get(start..).unwrap_or(&[]);
-    // A plain loop for a row, chunks for a column (a `step_by` iterator
-    // costs a call to `nth` a sample).
     let mut n = 0;
-    if stride <= 1 {
-        for (o, b) in out.iter_mut().zip(samples) {
-            *o = from(*b);
-            n += 1;
-        }
-    } else {
-        for (o, c) in out.iter_mut().zip(samples.chunks(stride)) {
-            *o = c.first().map_or(f32::NAN, |b| from(*b));
-            n += 1;
-        }
+    for (o, b) in out.iter_mut().zip(samples) {
+        *o = from(*b);
+        n += 1;
     }
     if let Some(rest) = out.get_mut(n..) {
         rest.fill(f32::NAN);
     }
 }
 
+/// A slab row's samples in the two slices held: rows `y` and `y + 1` of
+/// the lower slice's bytes and of the upper's (empty for the last slice's
+/// own slab), decoded block by block.
+struct SliceRows<'s> {
+    ty: SampleType,
+    nx: usize,
+    y: usize,
+    lower: &'s [u8],
+    upper: &'s [u8],
+}
+
+impl Rows for SliceRows<'_> {
+    const KEEPS: bool = true;
+
+    #[inline(always)]
+    fn lanes<'b>(
+        &'b self,
+        x0: usize,
+        n: usize,
+        need: [bool; 4],
+        fill: [bool; 4],
+        [b0, b1, b2, b3]: [&'b mut Lane; 4],
+    ) -> [&'b [f32]; 4] {
+        let (ty, nx, n) = (self.ty, self.nx, n.min(slab::LANE));
+        let row = move |k: usize, bytes: &[u8], y: usize, buf: &'b mut Lane| -> &'b [f32] {
+            let on = need.get(k) == Some(&true);
+            let out = buf.get_mut(..if on { n } else { 0 }).unwrap_or_default();
+            if fill.get(k) == Some(&true) {
+                decode(ty, bytes, y * nx + x0, out);
+            }
+            out
+        };
+        let (y, lo, up) = (self.y, self.lower, self.upper);
+        [row(0, lo, y, b0), row(1, lo, y + 1, b1), row(2, up, y, b2), row(3, up, y + 1, b3)]
+    }
+}
+
+/// The sizes whether the back may be folded is decided on: points the
+/// back held after its last fold, points the front holds, and bytes of
+/// the head of the slice memory.
+#[derive(Debug, Clone, Copy)]
+struct FoldRule {
+    folded_len: usize,
+    front_points: usize,
+    head: usize,
+}
+
+impl FoldRule {
+    /// Whether the back, about to outgrow its room, may be folded into
+    /// the front now: nothing spilled yet, a quarter of it new since the
+    /// last fold (each fold then gains), the front holds it, and the
+    /// stitch pass's scratch fits what the head of the slice memory leaves
+    /// beside the two slices from `at` on. Decided on these sizes alone,
+    /// never on whether the front or the whole memory is at hand, so that
+    /// every board folds at the same command.
+    fn allows(self, back: &Geometry<'_>, frags: u32, spilled: usize, at: usize) -> bool {
+        let fresh = back.len().saturating_sub(self.folded_len);
+        spilled == 0
+            && fresh >= back.capacity() / 4
+            && back.len() <= self.front_points
+            && path::stitch_reserve(frags as usize, back.len()) <= self.head.saturating_sub(at)
+    }
+}
+
 impl<'a> Stream<'a> {
     /// A stream over a slice memory of `capacity` bytes.
-    pub(crate) fn new(capacity: usize, rows: [&'a mut [f32]; 2], front_points: usize) -> Self {
+    pub(crate) fn new(capacity: usize, rows: &'a mut RowMemory, front_points: usize) -> Self {
         Self {
             capacity,
             rows,
@@ -370,19 +435,10 @@ impl<'a> Stream<'a> {
         self.wants_fold
     }
 
-    /// Whether the back, about to outgrow its room, may be folded into
-    /// the front now: nothing spilled yet, a quarter of it new since the
-    /// last fold (each fold then gains), the front holds it, and the
-    /// stitch pass's scratch fits what the head of the slice memory leaves
-    /// beside the two slices from `at` on. Decided on these sizes alone,
-    /// never on whether the front or the whole memory is at hand, so that
-    /// every board folds at the same command.
-    fn may_fold(&self, back: &Geometry<'_>, frags: u32, spilled: usize, at: usize) -> bool {
-        let fresh = back.len().saturating_sub(self.folded_len);
-        spilled == 0
-            && fresh >= back.capacity() / 4
-            && back.len() <= self.front_points
-            && path::stitch_reserve(frags as usize, back.len()) <= self.head().saturating_sub(at)
+    /// The sizes whether the back may be folded is decided on
+    /// ([`FoldRule::allows`]).
+    fn fold_rule(&self) -> FoldRule {
+        FoldRule { folded_len: self.folded_len, front_points: self.front_points, head: self.head() }
     }
 
     /// Stitch the back's pieces into maximal polylines (no merging: each
@@ -483,14 +539,10 @@ impl<'a> Stream<'a> {
         if self.cur == 0 { (a, b) } else { (b, a) }
     }
 
-    /// Samples one row may hold.
-    pub(crate) fn row_capacity(&self) -> usize {
-        self.rows.iter().map(|s| s.len()).min().unwrap_or(0)
-    }
-
     /// Start receiving a checked volume (its surface at `shift`).
     pub(crate) fn begin(&mut self, spec: VolumeSpec, now_ms: u32, shift: u8) {
         self.cur = 0;
+        self.rows.0.forget();
         self.transfer = Some(Transfer {
             spec,
             z: 0,
@@ -554,7 +606,7 @@ impl<'a> Stream<'a> {
         if let Some(t) = self.transfer.as_mut() {
             t.last_ms = now_ms;
             if complete {
-                let mut job = Job { z: t.z, slot: self.cur, phase: Phase::Xy, next: 0 };
+                let mut job = Job { z: t.z, slot: self.cur, lower: t.z.saturating_sub(1), next: 0, plane: 0 };
                 t.job = Self::ahead(&t.spec, &t.stride, &mut job).then_some(job);
                 t.z += 1;
                 t.offset = 0;
@@ -618,13 +670,10 @@ impl<'a> Stream<'a> {
         let (slots, rest) = slots.split_at_mut(at.min(slots.len()));
         let rest = rest.get_mut(..end.saturating_sub(at)).unwrap_or_default();
         let mut spill = Geometry::lent(rest, held);
-        if let Ok(mut rc) = RowContourer::new::<Infallible>(t.spec.levels.as_slice(), Traversal::Compiled) {
-            // (Making the contourer clears its 2 KB of scratch: a short row
-            // should not pay that alone.)
+        {
+            let fold = self.fold_rule();
+            let mut slab = Slab::new(t.spec.levels.as_slice(), Traversal::Compiled, &mut self.rows.0);
             let mut done = 0usize;
-            // The x-y row whose lower samples the last row left decoded
-            // and classed, as its upper ones.
-            let mut follow = None;
             let mut sink = Keep {
                 poll,
                 back: geometry,
@@ -642,8 +691,10 @@ impl<'a> Stream<'a> {
                 // More than a row can yield, and one: the back keeps the
                 // row's every command, and never at its last slot, as it
                 // does with the whole memory lent (see `Keep`).
-                if sink.back.capacity().saturating_sub(sink.back.len()) <= Self::row_bound(&t.spec) {
-                    if self.may_fold(sink.back, *sink.frags, sink.spill.len(), at) {
+                let room = sink.back.capacity().saturating_sub(sink.back.len());
+                let bound = Self::row_bound(&t.spec);
+                if room <= bound {
+                    if fold.allows(sink.back, *sink.frags, sink.spill.len(), at) {
                         self.wants_fold = true;
                         break;
                     }
@@ -652,16 +703,11 @@ impl<'a> Stream<'a> {
                         break;
                     }
                 }
-                match Self::row(
-                    &t.spec,
-                    &mut job,
-                    &mut rc,
-                    slots,
-                    &mut self.rows,
-                    &mut follow,
-                    &mut sink,
-                    &mut stats,
-                ) {
+                // The rest of the row at once where the back has room for
+                // all of it: the checks above, made before each plane,
+                // would have passed (fewer, longer steps).
+                let planes = if room > 3 * bound { 3 } else { 1 };
+                match Self::row(&t.spec, &mut job, planes, &mut slab, slots, &mut sink, &mut stats) {
                     Some(n) => done = done.saturating_add(n),
                     None => {
                         left = false;
@@ -678,8 +724,6 @@ impl<'a> Stream<'a> {
                 }
             }
             t.stride = sink.stride;
-        } else {
-            left = false;
         }
         self.spill = Some((at, spill.held()));
         t.stats += stats;
@@ -688,57 +732,69 @@ impl<'a> Stream<'a> {
         left
     }
 
-    /// The most commands a row of `spec` may yield
+    /// The most commands a row of one plane may yield: at most `nx` cells
     /// ([`MAX_COMMANDS_A_CELL`] a cell and level).
     fn row_bound(spec: &VolumeSpec) -> usize {
-        // (The longer extent: before `ahead`, the phase may still move on.)
-        let n = usize::from(spec.dims[0].max(spec.dims[1]));
-        n.saturating_sub(1) * spec.levels.len() * MAX_COMMANDS_A_CELL
+        usize::from(spec.dims[0]) * spec.levels.len() * MAX_COMMANDS_A_CELL
     }
 
-    /// Move `job` past the phases that are done or have nothing to do, and
-    /// past the slices `stride` skips; whether a row is left.
-    fn ahead(spec: &VolumeSpec, stride: &Stride, job: &mut Job) -> bool {
-        let [nx, ny] = [usize::from(spec.dims[0]), usize::from(spec.dims[1])];
-        loop {
-            // To the next slice kept (the stride may have grown since the
-            // last row).
-            match job.phase {
-                Phase::Xy => {}
-                Phase::Xz => job.next = stride.next(1, job.next as usize).min(ny) as u32,
-                Phase::Yz => job.next = stride.next(0, job.next as usize).min(nx) as u32,
-            }
-            let at = job.next as usize;
-            let done = match job.phase {
-                Phase::Xy => spec.axes & AXIS_Z == 0 || !stride.keeps(2, job.z) || at + 1 >= ny,
-                Phase::Xz => job.z == 0 || spec.axes & AXIS_Y == 0 || at >= ny,
-                Phase::Yz => job.z == 0 || spec.axes & AXIS_X == 0 || at >= nx,
-            };
-            if !done {
-                return true;
-            }
-            job.next = 0;
-            job.phase = match job.phase {
-                Phase::Xy => Phase::Xz,
-                Phase::Xz => Phase::Yz,
-                Phase::Yz => return false,
-            };
+    /// What the planes `planes` (0 x-y, 1 x-z, 2 y-z) of row `y` of the
+    /// slab on slice `lower` contour under `stride`: those asked for, in
+    /// the slices kept.
+    fn cut(spec: &VolumeSpec, stride: &Stride, lower: u16, y: usize, planes: Range<u8>) -> Cut {
+        Cut {
+            xy: planes.contains(&0) && spec.axes & AXIS_Z != 0 && stride.keeps(2, lower),
+            xz: planes.contains(&1) && spec.axes & AXIS_Y != 0 && stride.keeps(1, y as u16),
+            yz: if planes.contains(&2) && spec.axes & AXIS_X != 0 {
+                Every { first: stride.next(0, 0), step: usize::from(stride.every.max(1)) }
+            } else {
+                Every::NONE
+            },
         }
     }
 
-    /// Contour the next row of `job` (see [`Phase`]) and move past it;
-    /// returns its cells, or `None` when it has none left. `follow` is the
-    /// x-y row (slice, row) that `rc` and the upper of `rows` last left
-    /// ready as its lower row: such a row decodes and classes its upper
-    /// samples alone.
-    #[allow(clippy::too_many_arguments)]
+    /// Move `job` past the steps with nothing to do (under `stride`, which
+    /// may have grown since the last step) and past the slabs done;
+    /// whether a step is left.
+    fn ahead(spec: &VolumeSpec, stride: &Stride, job: &mut Job) -> bool {
+        let ny = usize::from(spec.dims[1]);
+        let last = job.z + 1 == spec.dims[2];
+        loop {
+            // The slab between `lower` and `z`, then the last slice's own.
+            let up = job.lower < job.z;
+            if !(up || (job.lower == job.z && last)) {
+                return false;
+            }
+            let y = job.next as usize;
+            if y >= ny {
+                job.lower += 1;
+                job.next = 0;
+                job.plane = 0;
+                continue;
+            }
+            let cut = Self::cut(spec, stride, job.lower, y, job.plane..job.plane + 1);
+            let right = y + 1 < ny;
+            if (cut.xy && right) || (up && (cut.xz || (cut.yz.step != 0 && right))) {
+                return true;
+            }
+            if job.plane < 2 {
+                job.plane += 1;
+            } else {
+                job.plane = 0;
+                job.next += 1;
+            }
+        }
+    }
+
+    /// Contour the next step of `job`, up to `planes` planes of its row,
+    /// and move past it; returns its cells, or `None` when it has none
+    /// left.
     fn row(
         spec: &VolumeSpec,
         job: &mut Job,
-        rc: &mut RowContourer<'_>,
+        planes: u8,
+        slab: &mut Slab<'_, '_, 1>,
         [s0, s1]: [&[u8]; 2],
-        rows: &mut [&mut [f32]; 2],
-        follow: &mut Option<(u16, u32)>,
         sink: &mut Keep<'_, '_, '_>,
         stats: &mut ContourStats,
     ) -> Option<usize> {
@@ -746,57 +802,22 @@ impl<'a> Stream<'a> {
             return None;
         }
         let [nx, ny] = [usize::from(spec.dims[0]), usize::from(spec.dims[1])];
-        let at = job.next as usize;
-        let ty = spec.sample_type;
+        let y = job.next as usize;
         let (cur, prev): (&[u8], &[u8]) = if job.slot == 0 { (s0, s1) } else { (s1, s0) };
-        let follows = job.phase == Phase::Xy && *follow == Some((job.z, job.next));
-        *follow = None;
-        if follows {
-            // Last row's upper samples are this one's lower.
-            rows.swap(0, 1);
+        let up = job.lower < job.z;
+        let (lower, upper) = if up { (prev, cur) } else { (cur, &[][..]) };
+        let rows = SliceRows { ty: spec.sample_type, nx, y, lower, upper };
+        let end = (job.plane + planes).min(3);
+        let cut = Self::cut(spec, &sink.stride, job.lower, y, job.plane..end);
+        let before = stats.cells;
+        let _ = slab.row(&rows, [nx, ny], y, usize::from(job.lower), up, cut, sink, stats);
+        if end < 3 {
+            job.plane = end;
+        } else {
+            job.plane = 0;
+            job.next += 1;
         }
-        let [r0, r1] = rows;
-        let n = if job.phase == Phase::Yz { ny } else { nx };
-        let (Some(l), Some(h)) = (r0.get_mut(..n), r1.get_mut(..n)) else {
-            return None;
-        };
-        let below = usize::from(job.z.saturating_sub(1));
-        match job.phase {
-            Phase::Xy => {
-                // Rows `at` and `at + 1` of the x-y slice z.
-                decode(ty, cur, (at + 1) * nx, 1, h);
-                let z = f32::from(job.z);
-                sink.enter_slice(2, job.z);
-                let place = |x, y| Point3::new(x, y, z);
-                let _ = if follows {
-                    rc.next_row(l, h, at, place, sink, stats)
-                } else {
-                    decode(ty, cur, at * nx, 1, l);
-                    rc.row(l, h, at, place, sink, stats)
-                };
-                job.next += 1;
-                *follow = Some((job.z, job.next));
-            }
-            Phase::Xz => {
-                // Row `z - 1` of subgrids of the x-z slice at y = `at`.
-                decode(ty, prev, at * nx, 1, l);
-                decode(ty, cur, at * nx, 1, h);
-                let y = at as f32;
-                sink.enter_slice(1, at as u16);
-                let _ = rc.row(l, h, below, |x, v| Point3::new(x, y, v), sink, stats);
-                job.next += 1;
-            }
-            Phase::Yz => {
-                // Row `z - 1` of subgrids of the y-z slice at x = `at`.
-                decode(ty, prev, at, nx, l);
-                decode(ty, cur, at, nx, h);
-                let x = at as f32;
-                sink.enter_slice(0, at as u16);
-                let _ = rc.row(l, h, below, |u, v| Point3::new(x, u, v), sink, stats);
-                job.next += 1;
-            }
-        }
-        Some(n.saturating_sub(1).max(1))
+        Some((stats.cells - before).max(1) as usize)
     }
 }
 
@@ -823,7 +844,7 @@ mod tests {
             since_poll: 0,
         };
         for &c in cmds {
-            let _ = keep.command(0, c);
+            let _ = keep.command(SliceId { plane: Plane::XY, index: 0 }, 0, c);
         }
         let src = Source::two(&back, &spill);
         let got = (0..src.len()).filter_map(|i| src.get(i)).map(|(q, k)| (q[0], k)).collect();
@@ -855,34 +876,145 @@ mod tests {
         assert_eq!(lens, [2, 1]);
     }
 
+    /// Keeps every command of a surface in a store.
+    struct Store<'g, 'a>(&'g mut Geometry<'a>);
+
+    impl SurfaceSink for Store<'_, '_> {
+        type Error = Infallible;
+        fn command(&mut self, _: SliceId, _: usize, c: Command<Point3>) -> Result<(), Infallible> {
+            let _ = self.0.push(c);
+            Ok(())
+        }
+    }
+
+    /// A volume received slice by slice keeps the very commands of
+    /// contouring it whole, in the very order (rows of one block, as the
+    /// board's; each sample type; a NaN, samples at a level, every plane
+    /// and a stride of two).
+    #[test]
+    fn a_stream_keeps_whole_volume_contouring_in_order() {
+        use crate::contour::grid::{Plane, Planes, Volume};
+        let (nx, ny, nz) = (13usize, 9usize, 7usize);
+        let mut values: Vec<f32> = (0..nx * ny * nz)
+            .map(|k| {
+                let (x, y, z) = ((k % nx) as f32, (k / nx % ny) as f32, (k / (nx * ny)) as f32);
+                ((x * 0.7).sin() * 40.0 + (y * 0.5).cos() * 30.0 + (z * 0.9).sin() * 20.0 + 100.0).round()
+            })
+            .collect();
+        values[3 * nx * ny + 2 * nx + 5] = f32::NAN;
+        let dims = [nx as u16, ny as u16, nz as u16];
+        let levels = [100.0f32, 131.5];
+        for ty in SampleType::ALL {
+            for (axes, every) in [
+                (AXIS_X | AXIS_Y | AXIS_Z, 1),
+                (AXIS_X | AXIS_Z, 1),
+                (AXIS_Y, 1),
+                (AXIS_X | AXIS_Y | AXIS_Z, 2),
+            ] {
+                let vals: Vec<f32> = values
+                    .iter()
+                    .map(|&v| if ty == SampleType::F32 || v.is_finite() { v } else { 0.0 })
+                    .collect();
+                let shift = Geometry::shift_for(dims);
+                let (mut wb, mut gb) =
+                    (vec![0u8; Geometry::bytes_for(20_000)], vec![0u8; Geometry::bytes_for(20_000)]);
+                let mut want = Geometry::new(&mut wb);
+                want.reset(shift);
+                // The whole volume, slab by slab as contour_slab goes, the
+                // slices `every` apart.
+                let volume = Volume::new(&vals, nx, ny, nz).unwrap();
+                let stride = Stride::new(dims, every);
+                let planes = [(AXIS_Z, Plane::XY, 2), (AXIS_Y, Plane::XZ, 1), (AXIS_X, Plane::YZ, 0)];
+                let set = planes.iter().filter(|p| axes & p.0 != 0).fold(Planes::NONE, |s, p| s.with(p.1));
+                let mut all = Vec::new();
+                {
+                    struct Tagged<'v>(&'v mut Vec<(SliceId, Command<Point3>)>);
+                    impl SurfaceSink for Tagged<'_> {
+                        type Error = Infallible;
+                        fn command(
+                            &mut self,
+                            s: SliceId,
+                            _: usize,
+                            c: Command<Point3>,
+                        ) -> Result<(), Infallible> {
+                            self.0.push((s, c));
+                            Ok(())
+                        }
+                    }
+                    crate::contour::surface::contour_volume(
+                        &volume,
+                        set,
+                        &levels,
+                        Traversal::Compiled,
+                        &mut Tagged(&mut all),
+                    )
+                    .unwrap();
+                }
+                let axis = |p: Plane| planes.iter().find(|q| q.1 == p).map_or(0, |q| q.2);
+                for (s, c) in all.iter().filter(|(s, _)| stride.keeps(axis(s.plane), s.index as u16)) {
+                    let _ = Store(&mut want).command(*s, 0, *c);
+                }
+                // The stream, fed whole slices.
+                let spec = VolumeSpec {
+                    dims,
+                    sample_type: ty,
+                    spacing: [1.0; 3],
+                    levels: Levels::from_slice(&levels).unwrap(),
+                    axes,
+                    every,
+                };
+                let mut rows = RowMemory::new();
+                let mut slots = vec![0u8; 2 * spec.slice_bytes()];
+                let mut stream = Stream::new(slots.len(), &mut rows, 20_000);
+                let mut got = Geometry::new(&mut gb);
+                got.reset(shift);
+                stream.begin(spec, 0, shift);
+                for z in 0..nz {
+                    let bytes: Vec<u8> = vals[z * nx * ny..(z + 1) * nx * ny]
+                        .iter()
+                        .flat_map(|&v| match ty {
+                            SampleType::U8 => vec![v as u8],
+                            SampleType::U16 => (v as u16).to_le_bytes().to_vec(),
+                            SampleType::I16 => (v as i16).to_le_bytes().to_vec(),
+                            SampleType::F32 => v.to_le_bytes().to_vec(),
+                        })
+                        .collect();
+                    stream.chunk(&mut slots, z as u16, 0, &bytes, 0, &mut got, false).unwrap();
+                }
+                let (got, want) = (got.commands().collect::<Vec<_>>(), want.commands().collect::<Vec<_>>());
+                assert!(want.len() > 100, "{ty:?} {axes} {every}: {}", want.len());
+                assert_eq!(got, want, "{ty:?} axes {axes} every {every}");
+            }
+        }
+    }
+
     #[test]
     fn decode_little_endian_types() {
         let mut out = [0.0f32; 3];
-        decode(SampleType::U8, &[1, 2, 3, 4, 5, 6], 1, 2, &mut out);
-        assert_eq!(out, [2.0, 4.0, 6.0]);
-        decode(SampleType::U16, &[0x34, 0x12, 0xFF, 0xFF], 0, 1, &mut out);
+        decode(SampleType::U8, &[1, 2, 3, 4, 5, 6], 1, &mut out);
+        assert_eq!(out, [2.0, 3.0, 4.0]);
+        decode(SampleType::U16, &[0x34, 0x12, 0xFF, 0xFF], 0, &mut out);
         assert_eq!(out[..2], [4660.0, 65535.0]);
         assert!(out[2].is_nan(), "past the end is NaN");
-        decode(SampleType::I16, &[0xFE, 0xFF, 0x00, 0x80], 0, 1, &mut out[..2]);
+        decode(SampleType::I16, &[0xFE, 0xFF, 0x00, 0x80], 0, &mut out[..2]);
         assert_eq!(out[..2], [-2.0, -32768.0]);
-        decode(SampleType::F32, &1.5f32.to_le_bytes(), 0, 1, &mut out[..1]);
+        decode(SampleType::F32, &1.5f32.to_le_bytes(), 0, &mut out[..1]);
         assert_eq!(out[0], 1.5);
     }
 
     proptest::proptest! {
         #[test]
-        fn decode_takes_every_stride_th_sample_and_nan_past_the_end(
+        fn decode_takes_each_sample_and_nan_past_the_end(
             bytes in proptest::collection::vec(proptest::num::u8::ANY, 0..200),
             start in 0usize..60,
-            stride in 0usize..9,
             n in 0usize..50,
         ) {
             for ty in SampleType::ALL {
                 let size = ty.size();
                 let mut out = vec![0.0f32; n];
-                decode(ty, &bytes, start, stride, &mut out);
+                decode(ty, &bytes, start, &mut out);
                 for (k, &got) in out.iter().enumerate() {
-                    let at = (start + k * stride.max(1)) * size;
+                    let at = (start + k) * size;
                     let want = bytes.get(at..at + size).map_or(f32::NAN, |b| match ty {
                         SampleType::U8 => f32::from(b[0]),
                         SampleType::U16 => f32::from(u16::from_le_bytes([b[0], b[1]])),

@@ -165,7 +165,7 @@ fn decode(log: &str, blank: &BlankPin) -> Result<Vec<Sample>, String> {
 }
 
 /// The firmware's engine memory, on the heap.
-type Memory = StaticBuffers<SLICE_BYTES, EXTENT, SURFACE_BYTES>;
+type Memory = StaticBuffers<SLICE_BYTES, SURFACE_BYTES>;
 
 /// What drawing the boot picture did.
 struct Boot {
