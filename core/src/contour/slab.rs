@@ -85,19 +85,21 @@ impl Every {
 }
 
 /// Which samples a row of classes or a lane holds: the block's first `x`,
-/// and the row's `y` and `z`, each plus one ([`NOTHING`]: none yet; so
-/// that memory that holds nothing is all zeros, and a board's `static` of
-/// it needs no initial bytes in flash).
-type Tag = [usize; 3];
+/// and the row's index in the volume (`z * ny + y`), each plus one
+/// ([`NOTHING`]: none yet; so that memory that holds nothing is all
+/// zeros, and a board's `static` of it needs no initial bytes in flash).
+/// Only rows of the volume are ever marked held, so a row named past its
+/// end (the `y + 1` of its last row) is never taken for one.
+type Tag = [usize; 2];
 
 /// The tag of a row that holds nothing yet.
-const NOTHING: Tag = [0; 3];
+const NOTHING: Tag = [0; 2];
 
 /// Whether two tags name the same row (word by word: the MCU's array
 /// compare is a call to `memcmp`).
 #[inline(always)]
-fn same([a0, a1, a2]: Tag, [b0, b1, b2]: Tag) -> bool {
-    (a0 == b0) & (a1 == b1) & (a2 == b2)
+fn same([a0, a1]: Tag, [b0, b1]: Tag) -> bool {
+    (a0 == b0) & (a1 == b1)
 }
 
 /// Four rows (of classes, or of samples) that move down a slab row by row:
@@ -265,12 +267,8 @@ impl<'l, 'm, const SETS: usize> Slab<'l, 'm, SETS> {
             block += 1;
             let mem = &mut *self.mem;
             let Some(held) = mem.held.get_mut(set) else { break };
-            let want = [
-                [x0 + 1, y + 1, z + 1],
-                [x0 + 1, y + 2, z + 1],
-                [x0 + 1, y + 1, z + 2],
-                [x0 + 1, y + 2, z + 2],
-            ];
+            let (r, up_r) = (z * ny + y + 1, (z + 1) * ny + y + 1);
+            let want = [[x0 + 1, r], [x0 + 1, r + 1], [x0 + 1, up_r], [x0 + 1, up_r + 1]];
             // Lanes to fill: those needed that a source keeping its lanes
             // does not have (every one needed, for a source that borrows).
             let fill = if R::KEEPS {
