@@ -40,8 +40,6 @@ pub struct DeviceOptions {
     pub engine: EngineConfig,
     /// Largest slice in bytes.
     pub slice_bytes: usize,
-    /// Largest row (x or y extent).
-    pub extent: usize,
     /// Commands per surface and points in the display list.
     pub points: usize,
     /// Drop a client that has sent no whole frame for this long (an idle
@@ -64,7 +62,6 @@ impl Default for DeviceOptions {
             exit_after: None,
             engine: EngineConfig::default(),
             slice_bytes: 512 * 512 * 4,
-            extent: 4096,
             points: 1 << 19,
             idle_timeout: None,
         }

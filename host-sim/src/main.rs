@@ -1233,7 +1233,7 @@ fn device(args: &DeviceArgs) -> Result<()> {
             opts.engine = b.engine_config();
             b.capacity
         }
-        None => host_capacity(opts.slice_bytes, opts.extent, opts.points),
+        None => host_capacity(opts.slice_bytes, usize::from(u16::MAX), opts.points),
     };
     let mut mem = HostBuffers::new(&capacity);
     let mut board = VirtualBoard::new(&mut mem, &opts)?;
