@@ -58,11 +58,7 @@ fn hydrogen_32_is_drawn_whole_on_the_board() {
     // The slices' loops cross at shared points: drawn inside one another,
     // a polyline a lobe.
     assert_eq!(board.polylines, 4);
-    // (The host stitches all its pieces at once, in the order the slab
-    // rows give them, and one loop is left unspliced: five polylines, and
-    // 0.0232 when the pieces came plane by plane. Which loops are spliced
-    // where they touch follows the order of the pieces.)
-    check(&host, 0.0296);
+    check(&host, 0.0230);
     check(&board, 0.0253);
 }
 
@@ -88,8 +84,7 @@ fn gyroid_48_is_whole_on_the_host_and_thinned_on_the_board() {
 fn brain_mri_holds_its_blank_figure() {
     let host = brain(Memory::Host);
     assert!(host.loaded.whole());
-    // (0.0491 when the pieces came plane by plane: see the hydrogen scene.)
-    check(&host, 0.0509);
+    check(&host, 0.0487);
     let board = brain(F407);
     // Thinned to its coarsest (every 64th slice from the middle), still a
     // little too large: the rest is dropped, and said to be.
