@@ -199,6 +199,16 @@ impl Plane {
         }
     }
 
+    /// The axis its slices are indexed along (0 x, 1 y, 2 z): z for the
+    /// x-y slices, y for the x-z, x for the y-z.
+    pub const fn axis(self) -> usize {
+        match self {
+            Plane::XY => 2,
+            Plane::XZ => 1,
+            Plane::YZ => 0,
+        }
+    }
+
     /// Bit of this plane in a [`Planes`] set.
     const fn bit(self) -> u8 {
         match self {

@@ -65,6 +65,20 @@ pub(crate) struct Cut {
     pub yz: Every,
 }
 
+impl Cut {
+    /// The planes that have cells in a row: the x-y cells need the row
+    /// `y + 1` (`right`), the x-z cells the slice `z + 1` (`up`), the y-z
+    /// cells both.
+    pub(crate) fn within(self, right: bool, up: bool) -> Cut {
+        Cut { xy: self.xy && right, xz: self.xz && up, yz: if right && up { self.yz } else { Every::NONE } }
+    }
+
+    /// Whether no cell is cut.
+    pub(crate) fn is_empty(self) -> bool {
+        !(self.xy || self.xz || self.yz.step != 0)
+    }
+}
+
 /// Slices `first, first + step, first + 2 step, ...`; none when `step` is 0.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) struct Every {
@@ -170,7 +184,7 @@ impl<T> Four<T> {
 /// theirs, rows of up to `(SETS - 1) * BLOCK + 1` samples; later blocks
 /// share the last set, classed anew), the cells' AND and the busy cells'
 /// batch. About `2.2 KB + SETS * 0.55 KB` where the batch holds one cell
-/// (the MCU). At least one set (none is taken as one).
+/// (the MCU). At least one set (checked when it is built).
 #[derive(Debug)]
 pub(crate) struct SlabMemory<const SETS: usize> {
     lanes: Four<Lane>,
@@ -182,6 +196,7 @@ pub(crate) struct SlabMemory<const SETS: usize> {
 impl<const SETS: usize> SlabMemory<SETS> {
     /// Memory that holds nothing yet.
     pub(crate) const fn new() -> Self {
+        const { assert!(SETS > 0, "a slab keeps at least one set of classes") };
         Self {
             lanes: Four::new([[0.0; LANE]; 4]),
             m: [0; BLOCK + 9],
@@ -243,12 +258,10 @@ impl<'l, 'm, const SETS: usize> Slab<'l, 'm, SETS> {
         sink: &mut S,
         stats: &mut ContourStats,
     ) -> Result<(), S::Error> {
-        let right = y + 1 < ny;
-        let yz = if right && up { cut.yz } else { Every::NONE };
-        let xz = cut.xz && up;
-        let xy = cut.xy && right;
+        let cut = cut.within(y + 1 < ny, up);
+        let Cut { xy, xz, yz } = cut;
         stats.cells += (u64::from(xy) + u64::from(xz)) * nx.saturating_sub(1) as u64 + yz.count(nx) as u64;
-        if !(xy || xz || yz.step != 0) {
+        if cut.is_empty() {
             return Ok(());
         }
         let (l1_in, h0_in, h1_in) = (xy || yz.step != 0, xz || yz.step != 0, yz.step != 0);
@@ -263,7 +276,7 @@ impl<'l, 'm, const SETS: usize> Slab<'l, 'm, SETS> {
             let x1 = (x0 + BLOCK).min(nx - 1);
             let n = x1 + 1 - x0;
             let ys = if x1 + 1 == nx { n } else { n - 1 };
-            let set = block.min(SETS.max(1) - 1);
+            let set = block.min(SETS - 1);
             block += 1;
             let mem = &mut *self.mem;
             let Some(held) = mem.held.get_mut(set) else { break };

@@ -19,7 +19,6 @@
 
 use super::RowMemory;
 use crate::command::{Command, Point3};
-use crate::contour::grid::Plane;
 use crate::contour::slab::{self, Cut, Every, Lane, Rows, Slab};
 use crate::contour::surface::{SliceId, SurfaceSink};
 use crate::contour::trace::Traversal;
@@ -112,6 +111,19 @@ pub(crate) struct Job {
     next: u32,
     /// The next plane of that row: 0 x-y, 1 x-z, 2 y-z.
     plane: u8,
+}
+
+impl Job {
+    /// Move past the planes of the row before `end` (all of them at 3 or
+    /// more: on to the next row).
+    fn past(&mut self, end: u8) {
+        if end < 3 {
+            self.plane = end;
+        } else {
+            self.plane = 0;
+            self.next += 1;
+        }
+    }
 }
 
 /// The two slices, the decoded rows and the transfer state.
@@ -228,12 +240,7 @@ impl SurfaceSink for Keep<'_, '_, '_> {
     type Error = Infallible;
     #[inline(always)]
     fn command(&mut self, slice: SliceId, _level: usize, c: Command<Point3>) -> Result<(), Infallible> {
-        let axis = match slice.plane {
-            Plane::XY => 2,
-            Plane::XZ => 1,
-            Plane::YZ => 0,
-        };
-        let index = slice.index as u16;
+        let (axis, index) = (slice.plane.axis(), slice.index as u16);
         if (axis, index) != self.slice {
             self.enter_slice(axis, index);
         }
@@ -670,61 +677,59 @@ impl<'a> Stream<'a> {
         let (slots, rest) = slots.split_at_mut(at.min(slots.len()));
         let rest = rest.get_mut(..end.saturating_sub(at)).unwrap_or_default();
         let mut spill = Geometry::lent(rest, held);
-        {
-            let fold = self.fold_rule();
-            let mut slab = Slab::new(t.spec.levels.as_slice(), Traversal::Compiled, &mut self.rows.0);
-            let mut done = 0usize;
-            let mut sink = Keep {
-                poll,
-                back: geometry,
-                spill: &mut spill,
-                frags: &mut t.frags,
-                memory: self.capacity,
-                stride: t.stride,
-                slice: (2, 0),
-                live: true,
-                since_poll: 0,
-            };
-            let (s0, s1) = slots.split_at(n.min(slots.len()));
-            let slots = [s0, s1];
-            loop {
-                // More than a row can yield, and one: the back keeps the
-                // row's every command, and never at its last slot, as it
-                // does with the whole memory lent (see `Keep`).
-                let room = sink.back.capacity().saturating_sub(sink.back.len());
-                let bound = Self::row_bound(&t.spec);
-                if room <= bound {
-                    if fold.allows(sink.back, *sink.frags, sink.spill.len(), at) {
-                        self.wants_fold = true;
-                        break;
-                    }
-                    if short {
-                        self.wants_all = true;
-                        break;
-                    }
-                }
-                // The rest of the row at once where the back has room for
-                // all of it: the checks above, made before each plane,
-                // would have passed (fewer, longer steps).
-                let planes = if room > 3 * bound { 3 } else { 1 };
-                match Self::row(&t.spec, &mut job, planes, &mut slab, slots, &mut sink, &mut stats) {
-                    Some(n) => done = done.saturating_add(n),
-                    None => {
-                        left = false;
-                        break;
-                    }
-                }
-                // Done as soon as the last row is: no empty call after it.
-                if !Self::ahead(&t.spec, &sink.stride, &mut job) {
-                    left = false;
+        let fold = self.fold_rule();
+        let mut slab = Slab::new(t.spec.levels.as_slice(), Traversal::Compiled, &mut self.rows.0);
+        let mut done = 0usize;
+        let bound = Self::row_bound(&t.spec);
+        let mut sink = Keep {
+            poll,
+            back: geometry,
+            spill: &mut spill,
+            frags: &mut t.frags,
+            memory: self.capacity,
+            stride: t.stride,
+            slice: (2, 0),
+            live: true,
+            since_poll: 0,
+        };
+        let (s0, s1) = slots.split_at(n.min(slots.len()));
+        let slots = [s0, s1];
+        loop {
+            // More than a row can yield, and one: the back keeps the
+            // row's every command, and never at its last slot, as it
+            // does with the whole memory lent (see `Keep`).
+            let room = sink.back.capacity().saturating_sub(sink.back.len());
+            if room <= bound {
+                if fold.allows(sink.back, *sink.frags, sink.spill.len(), at) {
+                    self.wants_fold = true;
                     break;
                 }
-                if !more(done) {
+                if short {
+                    self.wants_all = true;
                     break;
                 }
             }
-            t.stride = sink.stride;
+            // The rest of the row at once where the back has room for
+            // all of it: the checks above, made before each plane,
+            // would have passed (fewer, longer steps).
+            let planes = if room > 3 * bound { 3 } else { 1 };
+            match Self::row(&t.spec, &mut job, planes, &mut slab, slots, &mut sink, &mut stats) {
+                Some(n) => done = done.saturating_add(n),
+                None => {
+                    left = false;
+                    break;
+                }
+            }
+            // Done as soon as the last row is: no empty call after it.
+            if !Self::ahead(&t.spec, &sink.stride, &mut job) {
+                left = false;
+                break;
+            }
+            if !more(done) {
+                break;
+            }
         }
+        t.stride = sink.stride;
         self.spill = Some((at, spill.held()));
         t.stats += stats;
         t.job = left.then_some(job);
@@ -773,16 +778,10 @@ impl<'a> Stream<'a> {
                 continue;
             }
             let cut = Self::cut(spec, stride, job.lower, y, job.plane..job.plane + 1);
-            let right = y + 1 < ny;
-            if (cut.xy && right) || (up && (cut.xz || (cut.yz.step != 0 && right))) {
+            if !cut.within(y + 1 < ny, up).is_empty() {
                 return true;
             }
-            if job.plane < 2 {
-                job.plane += 1;
-            } else {
-                job.plane = 0;
-                job.next += 1;
-            }
+            job.past(job.plane + 1);
         }
     }
 
@@ -811,12 +810,7 @@ impl<'a> Stream<'a> {
         let cut = Self::cut(spec, &sink.stride, job.lower, y, job.plane..end);
         let before = stats.cells;
         let _ = slab.row(&rows, [nx, ny], y, usize::from(job.lower), up, cut, sink, stats);
-        if end < 3 {
-            job.plane = end;
-        } else {
-            job.plane = 0;
-            job.next += 1;
-        }
+        job.past(end);
         Some((stats.cells - before).max(1) as usize)
     }
 }
@@ -824,6 +818,7 @@ impl<'a> Stream<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::contour::grid::{Plane, Planes, Volume};
     use crate::path::{Kind, Source};
 
     /// `cmds` kept in a back of `back` points and a spill of `spill`: how
@@ -876,24 +871,12 @@ mod tests {
         assert_eq!(lens, [2, 1]);
     }
 
-    /// Keeps every command of a surface in a store.
-    struct Store<'g, 'a>(&'g mut Geometry<'a>);
-
-    impl SurfaceSink for Store<'_, '_> {
-        type Error = Infallible;
-        fn command(&mut self, _: SliceId, _: usize, c: Command<Point3>) -> Result<(), Infallible> {
-            let _ = self.0.push(c);
-            Ok(())
-        }
-    }
-
     /// A volume received slice by slice keeps the very commands of
     /// contouring it whole, in the very order (rows of one block, as the
     /// board's; each sample type; a NaN, samples at a level, every plane
     /// and a stride of two).
     #[test]
     fn a_stream_keeps_whole_volume_contouring_in_order() {
-        use crate::contour::grid::{Plane, Planes, Volume};
         let (nx, ny, nz) = (13usize, 9usize, 7usize);
         let mut values: Vec<f32> = (0..nx * ny * nz)
             .map(|k| {
@@ -924,7 +907,7 @@ mod tests {
                 // slices `every` apart.
                 let volume = Volume::new(&vals, nx, ny, nz).unwrap();
                 let stride = Stride::new(dims, every);
-                let planes = [(AXIS_Z, Plane::XY, 2), (AXIS_Y, Plane::XZ, 1), (AXIS_X, Plane::YZ, 0)];
+                let planes = [(AXIS_Z, Plane::XY), (AXIS_Y, Plane::XZ), (AXIS_X, Plane::YZ)];
                 let set = planes.iter().filter(|p| axes & p.0 != 0).fold(Planes::NONE, |s, p| s.with(p.1));
                 let mut all = Vec::new();
                 {
@@ -950,9 +933,8 @@ mod tests {
                     )
                     .unwrap();
                 }
-                let axis = |p: Plane| planes.iter().find(|q| q.1 == p).map_or(0, |q| q.2);
-                for (s, c) in all.iter().filter(|(s, _)| stride.keeps(axis(s.plane), s.index as u16)) {
-                    let _ = Store(&mut want).command(*s, 0, *c);
+                for (_, c) in all.iter().filter(|(s, _)| stride.keeps(s.plane.axis(), s.index as u16)) {
+                    let _ = want.push(*c);
                 }
                 // The stream, fed whole slices.
                 let spec = VolumeSpec {
