@@ -256,6 +256,24 @@ impl SurfaceSink for Keep<'_, '_, '_> {
             return Ok(());
         }
         let starts = !matches!(c, Command::LineTo(_));
+        // Nearly always: nothing spilled yet, and the back has room for
+        // this command and one after it (what `keep` would find first).
+        if self.spill.is_empty() && self.back.len() + 1 < self.back.capacity() {
+            if self.back.push(c).is_ok() && starts {
+                *self.frags = self.frags.saturating_add(1);
+            }
+            return Ok(());
+        }
+        self.keep(c, starts);
+        Ok(())
+    }
+}
+
+impl Keep<'_, '_, '_> {
+    /// [`SurfaceSink::command`] once the back is nearly full: into the
+    /// back's last slot, the spill, or (thinning first) either.
+    #[inline(never)]
+    fn keep(&mut self, c: Command<Point3>, starts: bool) {
         let kept = loop {
             let room = self.back.capacity().saturating_sub(self.back.len());
             // The back until the spill takes its first command (in order:
@@ -277,13 +295,12 @@ impl SurfaceSink for Keep<'_, '_, '_> {
                 break if back { self.back.push(c).is_ok() } else { self.spill.push_within(c, 0).is_ok() };
             }
             if !self.live {
-                return Ok(());
+                return;
             }
         };
         if kept && starts {
             *self.frags = self.frags.saturating_add(1);
         }
-        Ok(())
     }
 }
 

@@ -116,9 +116,11 @@ impl<'a> Geometry<'a> {
         shift
     }
 
-    /// The most points it holds.
+    /// The most points it holds: every point slot has its kind's bits
+    /// (`new` takes `points_in(bytes)` slots, whose kinds fit after them).
+    #[inline]
     pub fn capacity(&self) -> usize {
-        self.points.len().min(self.kinds.len().saturating_mul(4))
+        self.points.len()
     }
 
     /// Points held.
@@ -204,16 +206,18 @@ impl<'a> Geometry<'a> {
     }
 
     /// Append a point of `kind`; false when full (counted).
+    #[inline(always)]
     pub(crate) fn push_raw(&mut self, q: Packed, kind: Kind) -> bool {
-        if self.held.len >= self.capacity() {
+        let i = self.held.len;
+        // Both lookups fail together (`capacity`), past the last slot.
+        let (Some(slot), Some(byte)) = (self.points.get_mut(i), self.kinds.get_mut(i / 4)) else {
             self.held.dropped = self.held.dropped.saturating_add(1);
             return false;
-        }
-        if let Some(slot) = self.points.get_mut(self.held.len) {
-            *slot = pack(q);
-        }
-        self.set_kind(self.held.len, kind);
-        self.held.len += 1;
+        };
+        *slot = pack(q);
+        let s = 2 * (i % 4);
+        *byte = (*byte & !(3 << s)) | (kind.bits() << s);
+        self.held.len = i + 1;
         true
     }
 
@@ -243,40 +247,45 @@ impl<'a> Geometry<'a> {
     }
 
     /// [`Geometry::push`], as if the store held at most `cap` points.
+    #[inline(always)]
     pub(crate) fn push_within(
         &mut self,
         command: Command<Point3>,
         cap: usize,
     ) -> Result<(), Command<Point3>> {
         let kind = match command {
-            Command::LineTo(_) if self.held.broken => {
-                self.held.dropped = self.held.dropped.saturating_add(1);
-                return Err(command);
-            }
+            Command::LineTo(_) if self.held.broken => return Err(self.refuse(command, false)),
             Command::LineTo(_) => Kind::Line,
             Command::MoveTo(_) => Kind::Move,
             Command::Point(_) => Kind::Dot,
         };
-        if kind.starts() {
-            self.held.broken = false;
-        }
-        let q = self.quantise(*command.point());
-        let kept = if self.held.len < cap {
-            self.push_raw(q, kind)
-        } else {
-            self.held.dropped = self.held.dropped.saturating_add(1);
-            false
-        };
-        if !kept {
-            self.held.broken = true;
-            // A MoveTo whose line did not fit would draw nothing: take it back.
-            if matches!(self.get(self.held.len.wrapping_sub(1)), Some((_, Kind::Move))) {
-                self.pop();
-                self.held.dropped = self.held.dropped.saturating_add(1);
+        if self.held.len < cap && self.push_raw(self.quantise(*command.point()), kind) {
+            if kind.starts() {
+                self.held.broken = false;
             }
-            return Err(command);
+            return Ok(());
         }
-        Ok(())
+        Err(self.refuse(command, self.held.len < cap))
+    }
+
+    /// Count `command` refused (unless `push_raw` has), and break the
+    /// open polyline: its later `LineTo`s are refused too, and a `MoveTo`
+    /// left without its line is taken back (it would draw nothing).
+    #[cold]
+    #[inline(never)]
+    fn refuse(&mut self, command: Command<Point3>, counted: bool) -> Command<Point3> {
+        if !counted {
+            self.held.dropped = self.held.dropped.saturating_add(1);
+        }
+        if matches!(command, Command::LineTo(_)) && self.held.broken {
+            return command;
+        }
+        self.held.broken = true;
+        if matches!(self.get(self.held.len.wrapping_sub(1)), Some((_, Kind::Move))) {
+            self.pop();
+            self.held.dropped = self.held.dropped.saturating_add(1);
+        }
+        command
     }
 
     /// The drawing commands, in order; a closed loop ends with the `LineTo`
