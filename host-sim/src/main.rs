@@ -182,6 +182,11 @@ struct SendArgs {
     /// Data bytes per chunk, 1 to 1024.
     #[arg(long, default_value_t = isoscope_core::wire::MAX_CHUNK, value_parser = in_range::<1, 1024, usize>)]
     chunk: usize,
+    /// Timeouts in a row (each about half a second, more on a slow line)
+    /// before the board is given up on, 1 to 1000: more for a board that
+    /// is slowed down (under a debugger, or an emulator that logs).
+    #[arg(long, value_name = "N", default_value_t = 8, value_parser = in_range::<1, 1000, u32>)]
+    patience: u32,
     /// Set the view first: yaw in degrees (the other angles default to the
     /// default view's).
     #[arg(long, allow_hyphen_values = true)]
@@ -1142,7 +1147,7 @@ fn send(args: &SendArgs) -> Result<()> {
         chunk: args.chunk,
         baud: args.baud,
         view,
-        ..SendConfig::default()
+        max_timeouts: args.patience,
     };
     // The settings before the port: a bad one is refused here, not by the
     // board after the volume.

@@ -895,6 +895,8 @@ fn size_and_count_options_have_ranges() {
         &["render", "--demo", "hydrogen:8", "--frames", "4294967295"],
         &["send", "--demo", "hydrogen:8", "--port", "tcp:127.0.0.1:1", "--window", "0"],
         &["send", "--demo", "hydrogen:8", "--port", "tcp:127.0.0.1:1", "--baud", "0"],
+        &["send", "--demo", "hydrogen:8", "--port", "tcp:127.0.0.1:1", "--patience", "0"],
+        &["send", "--demo", "hydrogen:8", "--port", "tcp:127.0.0.1:1", "--patience", "1001"],
     ] {
         let out = run(args);
         let err = text(&out.stderr);
