@@ -185,7 +185,7 @@ struct SendArgs {
     /// Timeouts in a row (each about half a second, more on a slow line)
     /// before the board is given up on, 1 to 1000: more for a board that
     /// is slowed down (under a debugger, or an emulator that logs).
-    #[arg(long, value_name = "N", default_value_t = 8, value_parser = in_range::<1, 1000, u32>)]
+    #[arg(long, value_name = "N", default_value_t = isoscope_sim::link::MAX_TIMEOUTS, value_parser = in_range::<1, 1000, u32>)]
     patience: u32,
     /// Set the view first: yaw in degrees (the other angles default to the
     /// default view's).
@@ -1238,7 +1238,7 @@ fn device(args: &DeviceArgs) -> Result<()> {
             opts.engine = b.engine_config();
             b.capacity
         }
-        None => host_capacity(opts.slice_bytes, usize::from(u16::MAX), opts.points),
+        None => host_capacity(opts.slice_bytes, isoscope_sim::fit::WIRE_MAX_EXTENT, opts.points),
     };
     let mut mem = HostBuffers::new(&capacity);
     let mut board = VirtualBoard::new(&mut mem, &opts)?;

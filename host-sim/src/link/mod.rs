@@ -117,6 +117,10 @@ impl SendConfig {
     }
 }
 
+/// Timeouts in a row before the board is given up on, unless asked
+/// otherwise (`send --patience`).
+pub const MAX_TIMEOUTS: u32 = 8;
+
 impl Default for SendConfig {
     fn default() -> Self {
         Self {
@@ -127,7 +131,7 @@ impl Default for SendConfig {
             chunk: MAX_CHUNK,
             baud: 921_600,
             view: None,
-            max_timeouts: 8,
+            max_timeouts: MAX_TIMEOUTS,
         }
     }
 }
