@@ -9,7 +9,7 @@
 //! |---|---|---|
 //! | slices, twice (the stitching and ordering scratch between volumes) | `2 S` = 64 KB | CCM |
 //! | two surfaces: points (6 B) and their kinds (2 bits) | `12.5 P` = 102,400 | SRAM |
-//! | the rows around the cells being contoured ([`RowMemory`]) | 2.9 KB | SRAM |
+//! | the rows around the cells being contoured, and what the last two slices' rows share ([`RowMemory`]) | 3.2 KB | SRAM |
 //!
 //! The CCM (64 KB at 0x1000_0000) is reachable by the CPU only, which is
 //! all the engine needs; the DMA buffers of the output path stay in SRAM.

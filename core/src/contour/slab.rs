@@ -182,18 +182,21 @@ impl<T> Four<T> {
 /// widens each once a slab when its rows are one block), the classes of
 /// the first `SETS` blocks of them (the first `SETS - 1` blocks keep
 /// theirs, rows of up to `(SETS - 1) * BLOCK + 1` samples; later blocks
-/// share the last set, classed anew), the cells' AND and the busy cells'
-/// batch. About `2.2 KB + SETS * 0.55 KB` where the batch holds one cell
-/// (the MCU). At least one set (checked when it is built).
+/// share the last set, classed anew), the cells' AND, the busy cells'
+/// batch, and what the rows of the last two x-y slices share ([`Quiet`],
+/// `ROWS` rows a slice). About `2.2 KB + SETS * 0.55 KB + 2 * ROWS` where
+/// the batch holds one cell (the MCU). At least one set (checked when it
+/// is built).
 #[derive(Debug)]
-pub(crate) struct SlabMemory<const SETS: usize> {
+pub(crate) struct SlabMemory<const SETS: usize, const ROWS: usize> {
     lanes: Four<Lane>,
     m: Classes,
     batch: Batch,
     held: [Four<Classes>; SETS],
+    quiet: Quiet<ROWS>,
 }
 
-impl<const SETS: usize> SlabMemory<SETS> {
+impl<const SETS: usize, const ROWS: usize> SlabMemory<SETS, ROWS> {
     /// Memory that holds nothing yet.
     pub(crate) const fn new() -> Self {
         const { assert!(SETS > 0, "a slab keeps at least one set of classes") };
@@ -202,6 +205,7 @@ impl<const SETS: usize> SlabMemory<SETS> {
             m: [0; BLOCK + 9],
             batch: Batch::new(),
             held: [const { Four::new([[0; BLOCK + 9]; 4]) }; SETS],
+            quiet: Quiet::new(),
         }
     }
 
@@ -212,21 +216,79 @@ impl<const SETS: usize> SlabMemory<SETS> {
         for h in &mut self.held {
             h.forget();
         }
+        self.quiet.forget();
+    }
+}
+
+/// The class bits that every sample of a block of a row shares
+/// ([`quiet_bits`]), for the rows of the last two x-y slices that slabs
+/// classed as their upper rows: the next slab's lower rows. A slab row
+/// whose four rows share a class bit draws nothing, so a lower row known
+/// this way is neither classed nor widened again unless a level meets
+/// the slab row: a sample of a quiet stretch of the volume is classed once,
+/// not twice (once in each slab it belongs to).
+///
+/// An array of `ROWS` bytes for each slice parity, entry `block * ny + y`
+/// ([`KNOWN`] set where written); rows past `ROWS` are classed twice, as
+/// without it.
+#[derive(Debug)]
+struct Quiet<const ROWS: usize> {
+    bits: [[u8; ROWS]; 2],
+    /// The slice each array describes, plus one (0: none, so that memory
+    /// holding nothing is all zeros).
+    slice: [usize; 2],
+}
+
+/// An entry of [`Quiet`] that was written.
+const KNOWN: u8 = 0x80;
+
+impl<const ROWS: usize> Quiet<ROWS> {
+    const fn new() -> Self {
+        Self { bits: [[0; ROWS]; 2], slice: [0; 2] }
+    }
+
+    /// The bits that entry `i` of slice `z` shares, if known.
+    #[inline(always)]
+    fn get(&self, z: usize, i: usize) -> Option<u8> {
+        let p = z & 1;
+        if self.slice.get(p) != Some(&(z + 1)) {
+            return None;
+        }
+        let b = *self.bits.get(p)?.get(i)?;
+        (b & KNOWN != 0).then_some(b & !KNOWN)
+    }
+
+    /// Say that entry `i` of slice `z` shares `bits`.
+    #[inline(always)]
+    fn set(&mut self, z: usize, i: usize, bits: u8) {
+        let p = z & 1;
+        let (Some(arr), Some(slice)) = (self.bits.get_mut(p), self.slice.get_mut(p)) else { return };
+        if *slice != z + 1 {
+            arr.fill(0);
+            *slice = z + 1;
+        }
+        if let Some(b) = arr.get_mut(i) {
+            *b = bits | KNOWN;
+        }
+    }
+
+    fn forget(&mut self) {
+        self.slice = [0; 2];
     }
 }
 
 /// A slab contourer: levels and traversal, over its memory.
 #[derive(Debug)]
-pub(crate) struct Slab<'l, 'm, const SETS: usize> {
+pub(crate) struct Slab<'l, 'm, const SETS: usize, const ROWS: usize> {
     sweep: Sweep<'l>,
-    mem: &'m mut SlabMemory<SETS>,
+    mem: &'m mut SlabMemory<SETS, ROWS>,
 }
 
-impl<'l, 'm, const SETS: usize> Slab<'l, 'm, SETS> {
+impl<'l, 'm, const SETS: usize, const ROWS: usize> Slab<'l, 'm, SETS, ROWS> {
     /// A slab over finite `levels` (checked by the caller), in `mem`,
     /// which holds what earlier calls on the same samples and levels left
     /// (or was forgotten, [`SlabMemory::forget`]).
-    pub(crate) fn new(levels: &'l [f32], traversal: Traversal, mem: &'m mut SlabMemory<SETS>) -> Self {
+    pub(crate) fn new(levels: &'l [f32], traversal: Traversal, mem: &'m mut SlabMemory<SETS, ROWS>) -> Self {
         Self { sweep: Sweep::new(levels, traversal), mem }
     }
 
@@ -277,39 +339,78 @@ impl<'l, 'm, const SETS: usize> Slab<'l, 'm, SETS> {
             let n = x1 + 1 - x0;
             let ys = if x1 + 1 == nx { n } else { n - 1 };
             let set = block.min(SETS - 1);
+            // This block's entries of the slices' quiet rows.
+            let (at_y, at_y1) = (block * ny + y, block * ny + y + 1);
             block += 1;
             let mem = &mut *self.mem;
             let Some(held) = mem.held.get_mut(set) else { break };
             let (r, up_r) = (z * ny + y + 1, (z + 1) * ny + y + 1);
             let want = [[x0 + 1, r], [x0 + 1, r + 1], [x0 + 1, up_r], [x0 + 1, up_r + 1]];
-            // Lanes to fill: those needed that a source keeping its lanes
-            // does not have (every one needed, for a source that borrows).
-            let fill = if R::KEEPS {
-                let filled = mem.lanes.settle(want);
-                mem.lanes.mark(need, want);
-                and_not(need, filled)
-            } else {
-                need
-            };
             let classed = held.settle(want);
-            let [l0, l1, h0, h1] = rows.lanes(x0, n, need, fill, mem.lanes.places());
+            // The lower rows that the slab below classed as its upper rows
+            // and found quiet need neither lanes nor classes unless this
+            // row turns out busy (`lazy`); the others are brought `now`.
+            let known = [mem.quiet.get(z, at_y), if l1_in { mem.quiet.get(z, at_y1) } else { None }];
+            let lazy = [!classed[0] && known[0].is_some(), !classed[1] && known[1].is_some(), false, false];
+            let now = and_not(need, lazy);
+            // Lanes to fill: those brought now that a source keeping its
+            // lanes does not have (every one needed, for a source that
+            // borrows).
+            let (first, fill) = if R::KEEPS {
+                let filled = mem.lanes.settle(want);
+                mem.lanes.mark(now, want);
+                (now, and_not(now, filled))
+            } else {
+                (need, need)
+            };
+            let lanes = rows.lanes(x0, n, first, fill, mem.lanes.places());
             let [c0, c1, c2, c3] = held.places();
-            let class = and_not(need, classed);
-            for ((row, c), on) in [(l0, c0), (l1, c1), (h0, c2), (h1, c3)].into_iter().zip(class) {
+            let class = and_not(now, classed);
+            for ((row, c), on) in lanes.into_iter().zip([c0, c1, c2, c3]).zip(class) {
                 if on {
                     sweep.classify(row, c);
                 }
             }
-            held.mark(need, want);
+            held.mark(now, want);
             let [c0, c1, c2, c3] = held.places();
-            let (c0, c1, c2, c3) = (&*c0, &*c1, &*c2, &*c3);
+            let bits = |lazy: bool, known: Option<u8>, c: &Classes| match known {
+                Some(k) if lazy => k,
+                _ => quiet_bits(c, n),
+            };
+            let (q2, q3) = (quiet_bits(c2, n), quiet_bits(c3, n));
+            if h0_in {
+                mem.quiet.set(z + 1, at_y, q2);
+            }
+            if h1_in {
+                mem.quiet.set(z + 1, at_y1, q3);
+            }
             // A block whose samples share a class meets no level in any
             // plane: nothing to scan (the skip path's common case).
-            let shared = quiet_bits(c0, n)
-                & (if l1_in { quiet_bits(c1, n) } else { !0 })
-                & (if h0_in { quiet_bits(c2, n) } else { !0 })
-                & (if h1_in { quiet_bits(c3, n) } else { !0 });
+            let shared = bits(lazy[0], known[0], c0)
+                & (if l1_in { bits(lazy[1], known[1], c1) } else { !0 })
+                & (if h0_in { q2 } else { !0 })
+                & (if h1_in { q3 } else { !0 });
             if shared == 0 {
+                // Busy: the lower rows left lazy are wanted after all.
+                let lazy_any = lazy[0] || lazy[1];
+                let [l0, l1, h0, h1] = if R::KEEPS && lazy_any {
+                    let filled = mem.lanes.settle(want);
+                    mem.lanes.mark(lazy, want);
+                    rows.lanes(x0, n, need, and_not(lazy, filled), mem.lanes.places())
+                } else {
+                    lanes
+                };
+                if lazy_any {
+                    let [c0, c1, _, _] = held.places();
+                    for ((row, c), on) in [(l0, c0), (l1, c1)].into_iter().zip(lazy) {
+                        if on {
+                            sweep.classify(row, c);
+                        }
+                    }
+                    held.mark(lazy, want);
+                }
+                let [c0, c1, c2, c3] = held.places();
+                let (c0, c1, c2, c3) = (&*c0, &*c1, &*c2, &*c3);
                 let (m, batch) = (&mut mem.m, &mut mem.batch);
                 if xy {
                     let place = |_, u, v| Plane::XY.to_voxel(fz, u, v);
@@ -472,7 +573,7 @@ mod tests {
         /// with every row whole, in the very order.
         #[test]
         fn rows_cut_into_any_steps_draw_the_whole_volume(
-            (nx, ny, nz) in (1usize..=300, 1usize..=4, 1usize..=3),
+            (nx, ny, nz) in (1usize..=300, 1usize..=6, 1usize..=4),
             seed in any::<u64>(),
             levels in prop::collection::vec(prop::sample::select(vec![0.0f32, 0.5, -1.0, 1.5]), 1..3),
             steps in prop::collection::vec(prop::sample::select(vec![1u8, 2, 3]), 8),
@@ -493,7 +594,7 @@ mod tests {
             let volume = Volume::new(&values, nx, ny, nz).unwrap();
             let mut want = Log::default();
             let want_stats = contour_volume(&volume, Planes::ALL, &levels, Traversal::Compiled, &mut want).unwrap();
-            let mut mem = SlabMemory::<1>::new();
+            let mut mem = SlabMemory::<1, 4>::new();
             let mut slab = Slab::new(&levels, Traversal::Compiled, &mut mem);
             let (mut got, mut stats) = (Log::default(), ContourStats::default());
             let mut k = 0;

@@ -69,6 +69,11 @@ pub fn contour_slice<T: Voxel, S: SurfaceSink>(
 /// (1025) are classed twice, not four times (9 x 4 x 137 bytes of stack).
 const SETS: usize = 9;
 
+/// Rows of a slice (blocks of a row times its rows) whose shared class
+/// [`contour_slab`] keeps for the next slab (`2 x 4096` bytes of stack):
+/// rows of one block up to 4096 rows a slice, of 1025 samples up to 512.
+const QUIET_ROWS: usize = 4096;
+
 /// Contour the z-slab `zs` of every slice of `planes` at every level: the
 /// x-y slices `z` and the x-z and y-z cell rows `z` (the cells between the
 /// x-y slices `z` and `z + 1`) for `z` in `zs`, all three planes at once,
@@ -98,7 +103,7 @@ pub fn contour_slab<T: Voxel, S: SurfaceSink>(
         yz: if planes.contains(Plane::YZ) { Every::ALL } else { Every::NONE },
     };
     let mut stats = ContourStats::default();
-    let mut mem = SlabMemory::<SETS>::new();
+    let mut mem = SlabMemory::<SETS, QUIET_ROWS>::new();
     let mut slab = Slab::new(levels, traversal, &mut mem);
     for z in zs {
         for y in 0..ny {

@@ -6,9 +6,16 @@ use crate::contour::slab::SlabMemory;
 /// What the engine's contouring keeps from one step to the next: the
 /// samples (as `f32`) and classes of the four rows around a slab row,
 /// so that each is decoded and classed once however the rows' work is cut
-/// into steps (about 2.9 KB).
+/// into steps, and what the rows of the last two slices share, so that
+/// a quiet row is classed once a volume, not once in each of its two slabs
+/// ([`QUIET_ROWS`] rows of a slice; about 3.2 KB in all).
 #[derive(Debug)]
-pub struct RowMemory(pub(crate) SlabMemory<1>);
+pub struct RowMemory(pub(crate) SlabMemory<1, QUIET_ROWS>);
+
+/// Rows of a slice (of one block of 128 cells: a row of up to 129
+/// samples) whose shared class the engine keeps from one slab to the next:
+/// every row of a 128 x 128 slice. Rows past it are classed twice.
+pub const QUIET_ROWS: usize = 128;
 
 impl RowMemory {
     /// Memory that holds nothing yet.

@@ -48,7 +48,7 @@ mod stream;
 pub use crate::path::{ChainStats, Commands, Geometry, Kind, Packed};
 use crate::path::{Metric, Pass, Source};
 pub use board::{Board, Capacity};
-pub use buffers::{Buffers, RowMemory, StaticBuffers};
+pub use buffers::{Buffers, QUIET_ROWS, RowMemory, StaticBuffers};
 pub use config::{EngineConfig, EngineError};
 use device::{Device, Lend};
 pub use event::{AbortReason, Counters, Event};

@@ -17,6 +17,7 @@
 //! the next slice's data then waits for the job (the caller stops
 //! feeding), or finishes it first if it comes anyway.
 
+use super::QUIET_ROWS;
 use super::RowMemory;
 use crate::command::{Command, Point3};
 use crate::contour::slab::{self, Cut, Every, Lane, Rows, Slab};
@@ -824,7 +825,7 @@ impl<'a> Stream<'a> {
         spec: &VolumeSpec,
         job: &mut Job,
         planes: u8,
-        slab: &mut Slab<'_, '_, 1>,
+        slab: &mut Slab<'_, '_, 1, QUIET_ROWS>,
         [s0, s1]: [&[u8]; 2],
         sink: &mut Keep<'_, '_, '_>,
         stats: &mut ContourStats,
