@@ -150,14 +150,13 @@ impl<'a> Geometry<'a> {
 
     /// `p` in this store's fixed point (clamped to the `u16` range).
     pub fn quantise(&self, p: Point3) -> Packed {
-        Self::quantise_with(self.held.shift, p)
+        // The shift is at most 12 (`Held::empty`): no clamp for every point.
+        quantise_by(scale(self.held.shift), p)
     }
 
     /// `p` in the fixed point of `shift` (clamped to the `u16` range).
     pub fn quantise_with(shift: u8, p: Point3) -> Packed {
-        let k = f32::from(1u16 << shift.min(12));
-        let q = |v: f32| crate::fastmath::round_u16(v * k);
-        [q(p.x), q(p.y), q(p.z)]
+        quantise_by(scale(shift.min(12)), p)
     }
 
     /// A fixed point code back in voxel coordinates (exact).
@@ -311,8 +310,22 @@ pub(crate) struct Held {
     /// A command of the open polyline was refused: its later `LineTo`s are
     /// refused too, until the next `MoveTo` or `Point`.
     broken: bool,
-    /// Fixed point: `1 / 2^shift` voxel per code.
+    /// Fixed point: `1 / 2^shift` voxel per code; at most 12 ([`Held::empty`]).
     shift: u8,
+}
+
+/// `2^shift` exactly, from its exponent bits (`shift` at most 12): no
+/// integer-to-float conversion for every point stored.
+#[inline(always)]
+fn scale(shift: u8) -> f32 {
+    f32::from_bits((127 + u32::from(shift)) << 23)
+}
+
+/// `p` times `k`, each coordinate rounded to the `u16` range.
+#[inline(always)]
+fn quantise_by(k: f32, p: Point3) -> Packed {
+    let q = |v: f32| crate::fastmath::round_u16(v * k);
+    [q(p.x), q(p.y), q(p.z)]
 }
 
 impl Held {
@@ -758,6 +771,13 @@ mod tests {
         }
         assert_eq!(g.point(g.quantise(Point3::new(17.0, 3.5, 0.25))), Point3::new(17.0, 3.5, 0.25));
         assert_eq!(g.quantise(Point3::new(-1.0, 1e9, f32::NAN)), [0, 0xFFFF, 0]);
+    }
+
+    #[test]
+    fn scale_is_two_to_the_shift() {
+        for shift in 0..=12u8 {
+            assert_eq!(scale(shift), f32::from(1u16 << shift), "shift {shift}");
+        }
     }
 
     #[test]
