@@ -131,8 +131,11 @@ pub(crate) type Classes = [u8; BLOCK + 9];
 
 impl Sweep<'_> {
     /// The classes of `row` into `out` (see [`ABOVE`]); the bytes past the
-    /// row are set quiet. Branch-free: it vectorises.
-    #[inline(always)]
+    /// row are set quiet. Branch-free: it vectorises. Not inlined: a slab
+    /// row classes up to six rows in as many places, and inlined each copy
+    /// held the levels' bounds in registers that the whole row, called
+    /// once a row of the volume, then spilled and set up on every call.
+    #[inline(never)]
     pub(crate) fn classify(&self, row: &[f32], out: &mut Classes) {
         let (above, below) = (self.above, self.below);
         let class = |v: f32| {
