@@ -428,44 +428,77 @@ impl<'l, 'm, const SETS: usize, const ROWS: usize> Slab<'l, 'm, SETS, ROWS> {
                     sweep.run_classed(l0, h0, [c0, c2], m, batch, at, place, &mut to, stats)?;
                 }
                 if yz.step != 0 {
-                    and_across(m, [c0, c1, c2, c3], ys);
-                    leave_out(m, ys, x0, yz);
-                    // Cell `k` lies in the y-z slice at x0 + k, with
-                    // corners (y, z), (y + 1, z), (y + 1, z + 1), (y, z + 1).
-                    let at = Placement::new(y, z);
-                    let corners = |k: usize| match (l0.get(k), l1.get(k), h1.get(k), h0.get(k)) {
-                        (Some(&a), Some(&b), Some(&c), Some(&d)) => Some([a, b, c, d]),
-                        _ => None,
-                    };
-                    let slice = |k: usize| SliceId { plane: Plane::YZ, index: x0 + k };
-                    let place = |k: usize| {
-                        let fx = (x0 + k) as f32;
-                        move |u, v| Plane::YZ.to_voxel(fx, u, v)
-                    };
-                    if sweep.batched() {
-                        batch.gather(m, ys, sweep.level(), |k| Some((corners(k)?, at)));
-                        batch.each(|i, k, corners, program| {
-                            let to = &mut SliceSink { sink: &mut *sink, slice: slice(k) };
-                            match program {
-                                Some(p) => batch.draw(i, p, &place(k), to, stats),
-                                None => sweep.cell(corners, at, &place(k), to, stats),
-                            }
-                        })?;
-                    } else {
-                        each_busy(m, ys, |k| match corners(k) {
-                            Some(c) => {
-                                let to = &mut SliceSink { sink: &mut *sink, slice: slice(k) };
-                                sweep.cell(c, at, &place(k), to, stats)
-                            }
-                            None => Ok(()),
-                        })?;
-                    }
+                    draw_yz(
+                        sweep,
+                        [l0, l1, h0, h1],
+                        [c0, c1, c2, c3],
+                        m,
+                        batch,
+                        [x0, ys, y, z],
+                        yz,
+                        sink,
+                        stats,
+                    )?;
                 }
             }
             x0 = if x1 + 1 == nx { nx } else { x1 };
         }
         Ok(())
     }
+}
+
+/// The y-z cells of a busy block of a slab row (see [`Slab::row`]): the
+/// four rows' samples and classes, `m` and `batch` scratch, the block's
+/// first sample `x0` and its `ys` cells, the row `y` of the slab `z`. A
+/// call, as the x-y and x-z rows' [`Sweep::run_classed`] is: inlined into
+/// the row, what they set up before the row's loop cost every row, most
+/// of them quiet.
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn draw_yz<S: SurfaceSink>(
+    sweep: Sweep<'_>,
+    [l0, l1, h0, h1]: [&[f32]; 4],
+    [c0, c1, c2, c3]: [&Classes; 4],
+    m: &mut Classes,
+    batch: &mut Batch,
+    [x0, ys, y, z]: [usize; 4],
+    yz: Every,
+    sink: &mut S,
+    stats: &mut ContourStats,
+) -> Result<(), S::Error> {
+    and_across(m, [c0, c1, c2, c3], ys);
+    leave_out(m, ys, x0, yz);
+    // Cell `k` lies in the y-z slice at x0 + k, with
+    // corners (y, z), (y + 1, z), (y + 1, z + 1), (y, z + 1).
+    let at = Placement::new(y, z);
+    let corners = |k: usize| match (l0.get(k), l1.get(k), h1.get(k), h0.get(k)) {
+        (Some(&a), Some(&b), Some(&c), Some(&d)) => Some([a, b, c, d]),
+        _ => None,
+    };
+    let slice = |k: usize| SliceId { plane: Plane::YZ, index: x0 + k };
+    let place = |k: usize| {
+        let fx = (x0 + k) as f32;
+        move |u, v| Plane::YZ.to_voxel(fx, u, v)
+    };
+    if sweep.batched() {
+        batch.gather(m, ys, sweep.level(), |k| Some((corners(k)?, at)));
+        batch.each(|i, k, corners, program| {
+            let to = &mut SliceSink { sink: &mut *sink, slice: slice(k) };
+            match program {
+                Some(p) => batch.draw(i, p, &place(k), to, stats),
+                None => sweep.cell(corners, at, &place(k), to, stats),
+            }
+        })?;
+    } else {
+        each_busy(m, ys, |k| match corners(k) {
+            Some(c) => {
+                let to = &mut SliceSink { sink: &mut *sink, slice: slice(k) };
+                sweep.cell(c, at, &place(k), to, stats)
+            }
+            None => Ok(()),
+        })?;
+    }
+    Ok(())
 }
 
 /// `a` and not `b`, place by place.

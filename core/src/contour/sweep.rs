@@ -328,7 +328,7 @@ impl<'l> Sweep<'l> {
     /// [`Sweep::run_rows`] for rows whose classes `lo` and `up` are already
     /// known (a slab classes a row once for several planes); `m` is
     /// scratch.
-    #[inline(always)]
+    #[inline(never)]
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn run_classed<P, S: CommandSink<P>>(
         &self,
