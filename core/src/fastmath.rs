@@ -62,15 +62,17 @@ pub(crate) fn sqrt_recip(x: f32) -> (f32, f32) {
 
 /// `roundf(x)` (halves away from zero) clamped into `0..=65535`, NaN to
 /// 0: a point's fixed-point code. `libm`'s `roundf` is software on
-/// `thumbv7em`; here one add, one truncating conversion (it saturates, and
-/// takes NaN to 0) and one select. `x + 0.5` rounded to `f32` has the same
+/// `thumbv7em`; here one add, one truncating conversion to `i32` (it
+/// saturates, and takes NaN to 0), one clamp (a `usat` on the M4, where
+/// the unsigned conversion's clamp took a compare and a conditional move)
+/// and one select. `x + 0.5` rounded to `f32` has the same
 /// floor as the exact sum for `0.5 <= x < 2^23`: the sum is a multiple of
 /// `x`'s ulp, and where it rounds (in the next binade up) it stays in
 /// `[n, n + 1)` for the integer `n` below it. Below 0.5 the answer is 0
 /// (`0.49999997 + 0.5` rounds to 1.0); from 65534.5 on it is 65535.
 #[inline(always)]
 pub(crate) fn round_u16(x: f32) -> u16 {
-    let t = ((x + 0.5) as u32).min(u32::from(u16::MAX)) as u16;
+    let t = ((x + 0.5) as i32).clamp(0, i32::from(u16::MAX)) as u16;
     if x >= 0.5 { t } else { 0 }
 }
 
