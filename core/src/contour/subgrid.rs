@@ -346,18 +346,33 @@ impl Subgrid {
             None => [0, 0],
         };
         let (va, vb) = (self.at(usize::from(a)), self.at(usize::from(b)));
-        let mut num = level - va;
-        let mut den = vb - va;
-        if !(num.is_finite() && den.is_finite()) {
-            // Extreme values: halve everything so the differences fit.
-            num = level * 0.5 - va * 0.5;
-            den = vb * 0.5 - va * 0.5;
+        // Nearly always strictly inside: then both differences were finite
+        // (an infinite one gives an infinite, zero or NaN quotient), and
+        // the quotient is what the full form below gives, without its
+        // finiteness tests on every crossing.
+        let t = (level - va) / (vb - va);
+        if t > 0.0 && t < 1.0 {
+            return t;
         }
-        let t = num / den;
-        // 0.0 also for NaN (a zero-length range never contains a crossing).
-        let t = if t >= 0.0 { t } else { 0.0 };
-        if t <= 1.0 { t } else { 1.0 }
+        crossing_between(va, vb, level)
     }
+}
+
+/// The fraction of the way from `va` to `vb` where `level` lies, clamped
+/// to [0, 1] (0.0 for NaN: a zero-length range never contains a
+/// crossing); differences too large for `f32` are taken at half scale.
+#[inline(never)]
+fn crossing_between(va: f32, vb: f32, level: f32) -> f32 {
+    let mut num = level - va;
+    let mut den = vb - va;
+    if !(num.is_finite() && den.is_finite()) {
+        // Extreme values: halve everything so the differences fit.
+        num = level * 0.5 - va * 0.5;
+        den = vb * 0.5 - va * 0.5;
+    }
+    let t = num / den;
+    let t = if t >= 0.0 { t } else { 0.0 };
+    if t <= 1.0 { t } else { 1.0 }
 }
 
 /// Each edge's nodes in [`Edge::canonical`] order, as node indices (built
