@@ -161,6 +161,15 @@ impl<T> Four<T> {
         }
     }
 
+    /// Settle the rows `want`ed and say that the places `on` hold them;
+    /// returns those of `on` that did not hold them already (to be filled).
+    #[inline(always)]
+    fn bring(&mut self, on: [bool; 4], want: [Tag; 4]) -> [bool; 4] {
+        let held = self.settle(want);
+        self.mark(on, want);
+        and_not(on, held)
+    }
+
     /// Forget what every place holds.
     fn forget(&mut self) {
         self.tags = [NOTHING; 4];
@@ -350,34 +359,22 @@ impl<'l, 'm, const SETS: usize, const ROWS: usize> Slab<'l, 'm, SETS, ROWS> {
             // The lower rows that the slab below classed as its upper rows
             // and found quiet need neither lanes nor classes unless this
             // row turns out busy (`lazy`); the others are brought `now`.
-            let known = [mem.quiet.get(z, at_y), if l1_in { mem.quiet.get(z, at_y1) } else { None }];
-            let lazy = [!classed[0] && known[0].is_some(), !classed[1] && known[1].is_some(), false, false];
+            let known = [
+                if classed[0] { None } else { mem.quiet.get(z, at_y) },
+                if l1_in && !classed[1] { mem.quiet.get(z, at_y1) } else { None },
+            ];
+            let lazy = [known[0].is_some(), known[1].is_some(), false, false];
             let now = and_not(need, lazy);
             // Lanes to fill: those brought now that a source keeping its
             // lanes does not have (every one needed, for a source that
             // borrows).
-            let (first, fill) = if R::KEEPS {
-                let filled = mem.lanes.settle(want);
-                mem.lanes.mark(now, want);
-                (now, and_not(now, filled))
-            } else {
-                (need, need)
-            };
+            let (first, fill) = if R::KEEPS { (now, mem.lanes.bring(now, want)) } else { (need, need) };
             let lanes = rows.lanes(x0, n, first, fill, mem.lanes.places());
-            let [c0, c1, c2, c3] = held.places();
-            let class = and_not(now, classed);
-            for ((row, c), on) in lanes.into_iter().zip([c0, c1, c2, c3]).zip(class) {
-                if on {
-                    sweep.classify(row, c);
-                }
-            }
+            classify_rows(sweep, lanes, held.places(), and_not(now, classed));
             held.mark(now, want);
             let [c0, c1, c2, c3] = held.places();
-            let bits = |lazy: bool, known: Option<u8>, c: &Classes| match known {
-                Some(k) if lazy => k,
-                _ => quiet_bits(c, n),
-            };
-            let (q2, q3) = (quiet_bits(c2, n), quiet_bits(c3, n));
+            let q2 = if h0_in { quiet_bits(c2, n) } else { !0 };
+            let q3 = if h1_in { quiet_bits(c3, n) } else { !0 };
             if h0_in {
                 mem.quiet.set(z + 1, at_y, q2);
             }
@@ -386,29 +383,24 @@ impl<'l, 'm, const SETS: usize, const ROWS: usize> Slab<'l, 'm, SETS, ROWS> {
             }
             // A block whose samples share a class meets no level in any
             // plane: nothing to scan (the skip path's common case).
-            let shared = bits(lazy[0], known[0], c0)
-                & (if l1_in { bits(lazy[1], known[1], c1) } else { !0 })
-                & (if h0_in { q2 } else { !0 })
-                & (if h1_in { q3 } else { !0 });
+            let shared = known[0].unwrap_or_else(|| quiet_bits(c0, n))
+                & (if l1_in { known[1].unwrap_or_else(|| quiet_bits(c1, n)) } else { !0 })
+                & q2
+                & q3;
             if shared == 0 {
                 // Busy: the lower rows left lazy are wanted after all.
                 let lazy_any = lazy[0] || lazy[1];
-                let [l0, l1, h0, h1] = if R::KEEPS && lazy_any {
-                    let filled = mem.lanes.settle(want);
-                    mem.lanes.mark(lazy, want);
-                    rows.lanes(x0, n, need, and_not(lazy, filled), mem.lanes.places())
+                let lanes = if R::KEEPS && lazy_any {
+                    let fill = mem.lanes.bring(lazy, want);
+                    rows.lanes(x0, n, need, fill, mem.lanes.places())
                 } else {
                     lanes
                 };
                 if lazy_any {
-                    let [c0, c1, _, _] = held.places();
-                    for ((row, c), on) in [(l0, c0), (l1, c1)].into_iter().zip(lazy) {
-                        if on {
-                            sweep.classify(row, c);
-                        }
-                    }
+                    classify_rows(sweep, lanes, held.places(), lazy);
                     held.mark(lazy, want);
                 }
+                let [l0, l1, h0, h1] = lanes;
                 let [c0, c1, c2, c3] = held.places();
                 let (c0, c1, c2, c3) = (&*c0, &*c1, &*c2, &*c3);
                 let (m, batch) = (&mut mem.m, &mut mem.batch);
@@ -499,6 +491,16 @@ fn draw_yz<S: SurfaceSink>(
         })?;
     }
     Ok(())
+}
+
+/// The classes of the rows `on` of `rows` into their places.
+#[inline(always)]
+fn classify_rows(sweep: Sweep<'_>, rows: [&[f32]; 4], classes: [&mut Classes; 4], on: [bool; 4]) {
+    for ((row, c), on) in rows.into_iter().zip(classes).zip(on) {
+        if on {
+            sweep.classify(row, c);
+        }
+    }
 }
 
 /// `a` and not `b`, place by place.

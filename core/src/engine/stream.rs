@@ -17,8 +17,7 @@
 //! the next slice's data then waits for the job (the caller stops
 //! feeding), or finishes it first if it comes anyway.
 
-use super::QUIET_ROWS;
-use super::RowMemory;
+use super::{QUIET_ROWS, RowMemory};
 use crate::command::{Command, Point3};
 use crate::contour::slab::{self, Cut, Every, Lane, Rows, Slab};
 use crate::contour::surface::{SliceId, SurfaceSink};
