@@ -20,6 +20,7 @@ use isoscope_core::command::Command;
 use isoscope_core::contour::grid::Plane;
 use isoscope_core::engine::{Board, Capacity, ChainStats, EngineConfig};
 use isoscope_core::output::{Sample, SampleSource};
+use isoscope_core::path::Geometry;
 use isoscope_core::view::{ScreenPoint, View};
 use isoscope_core::wire::{AXIS_X, AXIS_Y, AXIS_Z, MAX_CHUNK, NackCode};
 
@@ -287,6 +288,50 @@ pub fn board_from(
         }
         return Ok((board, capacity));
     }
+}
+
+/// The board [`with_board`] builds, to keep, and its memory's size, with
+/// the host's memory started at `points`, the size a frame of another
+/// surface of the volume needed (another level, planes or stride): a
+/// slider moved from one level to the next contours a large surface once
+/// at the size the last one needed, rather than again at each size on the
+/// way.
+///
+/// The frame is [`with_board`]'s all the same (its samples, byte for
+/// byte). [`with_board`] keeps the first size that holds the surface whole,
+/// and a surface may be drawn otherwise in a larger memory (its order pass
+/// has more scratch). So a start that holds the surface whole is kept only
+/// when the surface has more points than the size below it has room for,
+/// in its surface and its whole slice memory (then that size would have
+/// thinned or dropped some, and [`with_board`] grown past it); else the
+/// volume is contoured again from the first size. A start too small grows
+/// as [`with_board`] does from there: it could not have held the surface
+/// at any smaller size either. With a board's memory `points` is not used.
+///
+/// # Errors
+/// As [`board_from`].
+pub fn board_near(
+    vol: &WireVolume,
+    cfg: &SceneConfig,
+    points: usize,
+    progress: Option<&Progress>,
+) -> Result<(OwnedBoard, Capacity)> {
+    let start = first_capacity(vol, cfg.memory, points);
+    let (board, capacity) = board_from(vol, cfg, points, progress)?;
+    let first = first_capacity(vol, cfg.memory, HOST_START_POINTS);
+    if cfg.memory != Memory::Host || capacity != start || capacity == first {
+        return Ok((board, capacity));
+    }
+    let below = host_capacity(capacity.slice_bytes, capacity.extent, capacity.points / 4);
+    let room = below.points + Geometry::points_in(2 * below.slice_bytes);
+    if board.board().loaded().commands as usize > room {
+        return Ok((board, capacity));
+    }
+    drop(board);
+    if let Some(p) = progress {
+        p.restart();
+    }
+    board_from(vol, cfg, HOST_START_POINTS, progress)
 }
 
 /// Build the frame of `vol` as `cfg` says.
@@ -713,6 +758,41 @@ mod tests {
                 Ok(())
             })
             .unwrap();
+        }
+    }
+
+    #[test]
+    fn starting_at_the_size_another_level_needed_draws_the_same_frame() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        // Frames fed to the boards, restarts included.
+        static FED: AtomicUsize = AtomicUsize::new(0);
+        fn count(_: &'static str, _: usize, _: usize) {
+            FED.fetch_add(1, Ordering::Relaxed);
+        }
+        let vol =
+            WireVolume::from_loaded(&LoadedVolume::demo("gyroid:32".parse().unwrap()).unwrap()).unwrap();
+        let frames = |cfg: &SceneConfig| crate::board::frames_for(&vol, &cfg.send().unwrap());
+        // Level 0 needs 262,144 points (contoured twice from the start);
+        // 1.4, near the values' end, fits the first size.
+        for (level, needs, started, once) in [
+            (0.0, 4 * HOST_START_POINTS, 4 * HOST_START_POINTS, true),
+            // Also room at the size below: contoured again from the first.
+            (0.0, 4 * HOST_START_POINTS, 16 * HOST_START_POINTS, false),
+            (1.4, HOST_START_POINTS, 4 * HOST_START_POINTS, false),
+            (1.4, HOST_START_POINTS, HOST_START_POINTS, true),
+        ] {
+            let cfg = SceneConfig { levels: vec![level], ..SceneConfig::default() };
+            let want = build(&vol, &cfg).unwrap();
+            assert_eq!(want.capacity.points, needs, "level {level}");
+            FED.store(0, Ordering::Relaxed);
+            let progress = Progress::with_hook("contouring", frames(&cfg), count);
+            let (board, capacity) = board_near(&vol, &cfg, started, Some(&progress)).unwrap();
+            let got = scene_of(board.board(), &vol, capacity, &cfg);
+            assert_eq!(got.capacity, want.capacity, "level {level} from {started}");
+            assert_eq!(got.samples, want.samples, "level {level} from {started}");
+            assert_eq!(got.commands, want.commands, "level {level} from {started}");
+            let fed = FED.load(Ordering::Relaxed);
+            assert_eq!(fed == frames(&cfg), once, "level {level} from {started}: {fed} frames fed");
         }
     }
 

@@ -645,18 +645,21 @@ impl Scope {
 
     /// The frame of `cfg`, as [`scene::build`] makes it, its progress
     /// told to the page. On the host's memory it starts at the size the
-    /// last frame needed if only the view changed since
+    /// last frame needed: if only the view changed since, that size
     /// ([`scene::board_from`]: the same frame, without contouring the
-    /// surface again at the sizes that did not fit). While the view turns,
-    /// the board it was built on comes with it, to turn
+    /// surface again at the sizes that did not fit); after a change of
+    /// level, planes or stride, that size if the new surface outgrows the
+    /// one below it ([`scene::board_near`]: the same frame, contoured once
+    /// while a slider moves through levels of about one size). While the
+    /// view turns, the board it was built on comes with it, to turn
     /// ([`Scope::set_turning`]).
     fn build(&self, wire: &WireVolume, cfg: &SceneConfig) -> Result<(Scene, Option<Turn>)> {
-        let points = match &self.fit {
-            Some((fit, points)) if *fit == self.fit_key() => *points,
-            _ => scene::HOST_START_POINTS,
-        };
         let progress = Progress::with_hook("contouring", frames_for(wire, &cfg.send()?), report_feeding);
-        let (board, capacity) = scene::board_from(wire, cfg, points, Some(&progress))?;
+        let (board, capacity) = match &self.fit {
+            Some((fit, points)) if *fit == self.fit_key() => scene::board_from(wire, cfg, *points, Some(&progress))?,
+            Some((_, points)) => scene::board_near(wire, cfg, *points, Some(&progress))?,
+            None => scene::board_from(wire, cfg, scene::HOST_START_POINTS, Some(&progress))?,
+        };
         let built = scene::scene_of(board.board(), wire, capacity, cfg);
         let turn = self.turning.then(|| Turn { board, capacity, fit: self.fit_key(), zoom: self.zoom });
         Ok((built, turn))
@@ -1241,9 +1244,18 @@ mod tests {
             WireVolume::from_loaded(&LoadedVolume::demo("gyroid:32".parse().unwrap()).unwrap()).unwrap();
         let cfg = s.config(s.wire().unwrap());
         assert_eq!(s.scene.as_ref().unwrap().samples, scene::build(&vol, &cfg).unwrap().samples);
-        // Another level starts again from the host's first size.
-        s.set_levels(vec![0.5]);
-        assert_ne!(s.fit.as_ref().unwrap().0, s.fit_key());
+        // Other levels start from the size the last one needed, and draw
+        // render's frame whether it fits (0.1) or not (1.4: the first size
+        // holds it, and it is contoured again from there).
+        for level in [0.1, 1.4, 0.0] {
+            s.set_levels(vec![level]);
+            assert_ne!(s.fit.as_ref().unwrap().0, s.fit_key());
+            s.redraw().unwrap();
+            let cfg = s.config(s.wire().unwrap());
+            let want = scene::build(&vol, &cfg).unwrap();
+            assert_eq!(s.scene.as_ref().unwrap().samples, want.samples, "level {level}");
+            assert_eq!(s.fit.as_ref().unwrap().1, want.capacity.points, "level {level}");
+        }
     }
 
     /// While the view turns, a frame is the board's picture turned with
