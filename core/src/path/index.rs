@@ -539,18 +539,19 @@ impl<'s, 'g> Index<'s, 'g> {
         (from, to.max(from + 1).min(self.src.len().max(from + 1)))
     }
 
-    /// The fragment holding point `i`.
+    /// The fragment holding point `i`: the last whose first point is at
+    /// or before it (the first fragment for none). A binary search whose
+    /// step is a select, not a branch: the order pass asks it some
+    /// quarter of a million times for a 124,000-point surface, at random.
     pub(super) fn frag_of(&self, i: usize) -> usize {
-        let (mut lo, mut hi) = (0, self.frags);
-        while hi - lo > 1 {
-            let mid = (lo + hi) / 2;
-            if (self.w.get(mid) & !DRAWN) as usize <= i {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
+        let (mut base, mut size) = (0, self.frags);
+        while size > 1 {
+            let half = size / 2;
+            let mid = base + half;
+            base = if (self.w.get(mid) & !DRAWN) as usize <= i { mid } else { base };
+            size -= half;
         }
-        lo
+        base
     }
 
     pub(super) fn is_loop(&self, f: usize) -> bool {
