@@ -656,7 +656,9 @@ impl Scope {
     fn build(&self, wire: &WireVolume, cfg: &SceneConfig) -> Result<(Scene, Option<Turn>)> {
         let progress = Progress::with_hook("contouring", frames_for(wire, &cfg.send()?), report_feeding);
         let (board, capacity) = match &self.fit {
-            Some((fit, points)) if *fit == self.fit_key() => scene::board_from(wire, cfg, *points, Some(&progress))?,
+            Some((fit, points)) if *fit == self.fit_key() => {
+                scene::board_from(wire, cfg, *points, Some(&progress))?
+            }
             Some((_, points)) => scene::board_near(wire, cfg, *points, Some(&progress))?,
             None => scene::board_from(wire, cfg, scene::HOST_START_POINTS, Some(&progress))?,
         };
