@@ -1118,7 +1118,11 @@ fn exp_neg(x: f32) -> f32 {
 fn erf(x: f32) -> f32 {
     const P: f32 = 0.327_591_1;
     const A: [f32; 5] = [0.254_829_6, -0.284_496_74, 1.421_413_8, -1.453_152, 1.061_405_4];
-    let a = x.abs().min(10.0);
+    // A select, not `f32::min`: the same value for every input (NaN
+    // included), where wasm's `f32.min` is not Rust's and `min` took a
+    // longer sequence there.
+    let a = x.abs();
+    let a = if a < 10.0 { a } else { 10.0 };
     let t = 1.0 / (1.0 + P * a);
     let poly = t * (A[0] + t * (A[1] + t * (A[2] + t * (A[3] + t * A[4]))));
     (1.0 - poly * exp_neg(-a * a)).copysign(x)
