@@ -135,6 +135,10 @@ pub fn axes(planes: &[Plane]) -> u8 {
 pub const HOST_START_POINTS: usize = 1 << 16;
 /// The most points a host surface grows to (16.7M: 210 MB of surfaces).
 pub const HOST_MAX_POINTS: usize = 1 << 24;
+/// How many times larger each size of a growing host memory is than the
+/// last: [`board_from`] grows by it, and [`board_near`] asks whether the
+/// size it divides down to would have held a surface.
+const HOST_GROWTH: usize = 4;
 
 /// A frame as the board plays it, and what it took.
 #[derive(Debug, Clone, PartialEq)]
@@ -187,8 +191,8 @@ fn first_capacity(vol: &WireVolume, memory: Memory, points: usize) -> Capacity {
         Memory::Host => {
             let extent = usize::from(vol.dims[0].max(vol.dims[1])).max(2);
             let mut start = HOST_START_POINTS;
-            while start * 4 <= points.min(HOST_MAX_POINTS) {
-                start *= 4;
+            while start * HOST_GROWTH <= points.min(HOST_MAX_POINTS) {
+                start *= HOST_GROWTH;
             }
             host_capacity(vol.slice_bytes().max(64), extent, start)
         }
@@ -279,7 +283,7 @@ pub fn board_from(
             Err(e) => return Err(e.context("putting the volume on the board")),
         };
         if can_grow && !whole {
-            capacity = host_capacity(capacity.slice_bytes, capacity.extent, capacity.points * 4);
+            capacity = host_capacity(capacity.slice_bytes, capacity.extent, capacity.points * HOST_GROWTH);
             // The volume is fed again from its first frame.
             if let Some(p) = progress {
                 p.restart();
@@ -322,8 +326,9 @@ pub fn board_near(
     if cfg.memory != Memory::Host || capacity != start || capacity == first {
         return Ok((board, capacity));
     }
-    let below = host_capacity(capacity.slice_bytes, capacity.extent, capacity.points / 4);
-    let room = below.points + Geometry::points_in(2 * below.slice_bytes);
+    // What the size below holds at most: its surface, and its two slices'
+    // memory given over to the spill.
+    let room = capacity.points / HOST_GROWTH + Geometry::points_in(2 * capacity.slice_bytes);
     if board.board().loaded().commands as usize > room {
         return Ok((board, capacity));
     }
