@@ -741,10 +741,17 @@ impl<'a> Stream<'a> {
                     break;
                 }
             }
-            // The rest of the row at once where the back has room for
-            // all of it: the checks above, made before each plane,
-            // would have passed (fewer, longer steps).
-            let planes = if room > 3 * bound { 3 } else { 1 };
+            // As many planes of the row at once as the checks above, made
+            // before each plane, would let through (fewer, longer steps):
+            // all that the back has room for, and the whole row once the
+            // spill has begun (a fold needs an empty spill, and a row with
+            // the head alone never spills; a thinning that empties the
+            // spill within the row is checked at the next row).
+            let planes = if !sink.spill.is_empty() && !short {
+                3
+            } else {
+                (room.saturating_sub(1) / bound.max(1)).clamp(1, 3) as u8
+            };
             match Self::row(&t.spec, &mut job, planes, &mut slab, slots, &mut sink, &mut stats) {
                 Some(n) => done = done.saturating_add(n),
                 None => {
