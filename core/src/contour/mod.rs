@@ -149,29 +149,22 @@ pub fn contour_subgrid<P, S: CommandSink<P>>(
         if !(lo <= level && level <= hi) {
             continue;
         }
-        let mut placed = Placed::new();
-        let mut send = |c: Command<(f32, f32)>| {
-            sent += 1;
-            sink.command(li, c.map(|(x, y)| place(x, y)))
-        };
         let (below, on) = sub.below(level);
         if !on
             && traversal == Traversal::Compiled
             && let Some(program) = compiled::program(code, below)
         {
-            // The compiled traversal: every crossing inside an edge, no
-            // node at the level.
-            let mut steps = program.packed();
-            for _ in 0..program.len() {
-                let e = steps as usize & 7;
-                let p = at.along(e, sub.crossing_inside(e, level));
-                placed
-                    .step(if steps & 8 != 0 { Command::LineTo(p) } else { Command::MoveTo(p) }, &mut send)?;
-                steps >>= 4;
-            }
-            placed.finish(&mut send)?;
+            draw_program(sub, at, level, program, |c| {
+                sent += 1;
+                sink.command(li, c.map(|(x, y)| place(x, y)))
+            })?;
             continue;
         }
+        let mut placed = Placed::new();
+        let mut send = |c: Command<(f32, f32)>| {
+            sent += 1;
+            sink.command(li, c.map(|(x, y)| place(x, y)))
+        };
         let tpl = Template::for_code(code);
         let mut out = |c: Command<Crossing>| placed.step(c.map(|x| at.locate(sub, level, x)), &mut send);
         let mut err = None;
@@ -212,6 +205,32 @@ pub fn contour_subgrid<P, S: CommandSink<P>>(
         placed.finish(&mut send)?;
     }
     Ok(sent)
+}
+
+/// Draw the compiled traversal's `program` of `sub` (its key at `level`:
+/// every crossing inside an edge, no node at the level): its commands, in
+/// the cell's grid coordinates, to `send`. Each caller passes a closure
+/// of its own, so that each is inlined where it is called.
+///
+/// # Errors
+/// The error of `send`.
+#[inline(always)]
+pub(crate) fn draw_program<E>(
+    sub: &Subgrid,
+    at: Placement,
+    level: f32,
+    program: compiled::Program,
+    mut send: impl FnMut(Command<(f32, f32)>) -> Result<(), E>,
+) -> Result<(), E> {
+    let mut placed = Placed::new();
+    let mut steps = program.packed();
+    for _ in 0..program.len() {
+        let e = steps as usize & 7;
+        let p = at.along(e, sub.crossing_inside(e, level));
+        placed.step(if steps & 8 != 0 { Command::LineTo(p) } else { Command::MoveTo(p) }, &mut send)?;
+        steps >>= 4;
+    }
+    placed.finish(&mut send)
 }
 
 /// Contour every subgrid of `grid` at every level, in row order (`j`, then

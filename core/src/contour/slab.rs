@@ -482,13 +482,28 @@ fn draw_yz<S: SurfaceSink>(
             }
         })?;
     } else {
-        each_busy(m, ys, |k| match corners(k) {
-            Some(c) => {
-                let to = &mut SliceSink { sink: &mut *sink, slice: slice(k) };
-                sweep.cell(c, at, &place(k), to, stats)
-            }
-            None => Ok(()),
-        })?;
+        // The corners' classes, in the corners' order.
+        let classes = |k: usize| match (c0.get(k), c1.get(k), c3.get(k), c2.get(k)) {
+            (Some(&a), Some(&b), Some(&c), Some(&d)) => [a, b, c, d],
+            _ => [0; 4],
+        };
+        if sweep.classed() {
+            each_busy(m, ys, |k| match corners(k) {
+                Some(c) => {
+                    let to = &mut SliceSink { sink: &mut *sink, slice: slice(k) };
+                    sweep.cell_classed(c, classes(k), at, &place(k), to, stats)
+                }
+                None => Ok(()),
+            })?;
+        } else {
+            each_busy(m, ys, |k| match corners(k) {
+                Some(c) => {
+                    let to = &mut SliceSink { sink: &mut *sink, slice: slice(k) };
+                    sweep.cell(c, at, &place(k), to, stats)
+                }
+                None => Ok(()),
+            })?;
+        }
     }
     Ok(())
 }

@@ -19,10 +19,11 @@
 
 use super::batch::Batch;
 use super::pen::Placement;
+use super::subgrid::Node;
 use super::subgrid::Subgrid;
 use super::trace::Traversal;
 use super::voxel::Voxel;
-use super::{ContourStats, contour_subgrid};
+use super::{ContourStats, compiled, contour_subgrid, draw_program};
 use crate::command::CommandSink;
 
 /// Cells per block. The scratch space is about 17 bytes per cell (2.2 KiB
@@ -355,10 +356,75 @@ impl<'l> Sweep<'l> {
                 None => self.cell(corners, at(k), &|x, y| place(k, x, y), sink, stats),
             });
         }
+        let classes = |k: usize| match (lo.get(k), lo.get(k + 1), up.get(k + 1), up.get(k)) {
+            (Some(&a), Some(&b), Some(&c), Some(&d)) => [a, b, c, d],
+            _ => [0; 4],
+        };
+        // The classes help at one level only: the loop is chosen once.
+        if self.classed() {
+            return each_busy(m, cells, |k| match corners(k) {
+                Some(c) => self.cell_classed(c, classes(k), at(k), &|x, y| place(k, x, y), sink, stats),
+                None => Ok(()),
+            });
+        }
         each_busy(m, cells, |k| match corners(k) {
             Some(c) => self.cell(c, at(k), &|x, y| place(k, x, y), sink, stats),
             None => Ok(()),
         })
+    }
+
+    /// Whether [`Sweep::cell_classed`] draws some cells from their classes:
+    /// one level, the compiled traversal.
+    #[inline(always)]
+    pub(crate) fn classed(&self) -> bool {
+        self.levels.len() == 1 && self.traversal == Traversal::Compiled
+    }
+
+    /// [`Sweep::cell`] for a cell whose corners' classes are known, in
+    /// the same order (LL, LR, UR, UL). At one level a corner of class
+    /// [`ABOVE`] or [`BELOW`] is finite and off the level, on the side the
+    /// class says: when all four are, the cell is finite, crosses the
+    /// level (it is busy: its corners lie on both sides) and has no
+    /// corner at it, so only the centre is compared before its compiled
+    /// program is drawn. Others take [`Sweep::cell`]: the same commands.
+    #[inline(always)]
+    pub(crate) fn cell_classed<P, S: CommandSink<P>>(
+        &self,
+        corners: [f32; 4],
+        [ca, cb, cc, cd]: [u8; 4],
+        at: Placement,
+        place: &impl Fn(f32, f32) -> P,
+        sink: &mut S,
+        stats: &mut ContourStats,
+    ) -> Result<(), S::Error> {
+        if let &[level] = self.levels
+            && self.classed()
+            && (ca != 0) & (cb != 0) & (cc != 0) & (cd != 0)
+        {
+            let [a, b, c, d] = corners;
+            let sub = Subgrid::from_finite(a, b, c, d);
+            let m = sub.value(Node::C);
+            // Corner `n` lies below the level when its class is BELOW
+            // (bit 1): bit `n` of the nodes below, as `Subgrid::below`.
+            let below = ((ca & BELOW) >> 1)
+                | (cb & BELOW)
+                | ((cc & BELOW) << 1)
+                | ((cd & BELOW) << 2)
+                | (u8::from(m <= level) << 4);
+            if m != level
+                && let Some(program) = compiled::program(sub.code(), below)
+            {
+                let mut sent = 0u32;
+                draw_program(&sub, at, level, program, |c| {
+                    sent += 1;
+                    sink.command(0, c.map(|(x, y)| place(x, y)))
+                })?;
+                stats.crossing_cells += u64::from(sent > 0);
+                stats.commands += u64::from(sent);
+                return Ok(());
+            }
+        }
+        self.cell(corners, at, place, sink, stats)
     }
 
     /// Contour one cell that the classes did not skip.
@@ -479,6 +545,37 @@ mod tests {
 
     /// Records every command with its level.
     struct Record(Vec<(usize, Command<Placed>)>);
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(2000))]
+        /// A cell given its corners' classes draws, bit for bit, what it
+        /// draws without them, and counts the same: at one level (the
+        /// board's path, which the host's batch otherwise takes) and at
+        /// several, with corners at the levels, non-finite and huge.
+        #[test]
+        fn a_cell_draws_the_same_with_its_classes(
+            corners in prop::array::uniform4(sample()),
+            levels in prop::collection::vec(prop::sample::select(vec![0.0f32, -0.0, 0.5, 1.0, -1.0, 2.5]), 1..3),
+            compiled in any::<bool>(),
+        ) {
+            let traversal = if compiled { Traversal::Compiled } else { Traversal::Corrected };
+            let sweep = Sweep::new(&levels, traversal);
+            let mut classes: Classes = [0; BLOCK + 9];
+            sweep.classify(&corners, &mut classes);
+            let [a, b, c, d] = [classes[0], classes[1], classes[2], classes[3]];
+            // Only busy cells are drawn: the AND of the classes is 0.
+            prop_assume!(a & b & c & d == 0);
+            let at = Placement::new(3, 7);
+            let place = |x: f32, y: f32| (0usize, x, y);
+            let (mut with, mut without) = (Record(Vec::new()), Record(Vec::new()));
+            let (mut with_stats, mut without_stats) = (ContourStats::default(), ContourStats::default());
+            let _ = sweep.cell_classed(corners, [a, b, c, d], at, &place, &mut with, &mut with_stats);
+            let _ = sweep.cell(corners, at, &place, &mut without, &mut without_stats);
+            let bits = |r: &Record| r.0.iter().map(|(l, c)| (*l, c.map(|(k, x, y)| (k, x.to_bits(), y.to_bits())))).collect::<Vec<_>>();
+            prop_assert_eq!(bits(&with), bits(&without));
+            prop_assert_eq!(with_stats, without_stats);
+        }
+    }
 
     impl CommandSink<Placed> for Record {
         type Error = core::convert::Infallible;
