@@ -95,9 +95,11 @@ pub(crate) struct Transfer {
 /// The contouring a completed slice `z` owes: the rows of the slab
 /// between slices `z - 1` and `z`, then, after the last slice, those of
 /// the slab of slice `z` alone (its x-y cells); where it stands. A step
-/// is a row's planes from `plane` on, all of them where the back has room
-/// for all they may yield, else one (the bound the memory is checked
-/// against before each plane).
+/// is a row's planes from `plane` on, as many as the back has room for
+/// all they may yield (the bound the memory is checked against before
+/// each plane; all of them once the spill has begun). A transfer's job
+/// always stands at a step with something to do under the transfer's
+/// stride ([`Stream::ahead`] is called wherever one is made or moved).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub(crate) struct Job {
@@ -752,14 +754,11 @@ impl<'a> Stream<'a> {
             } else {
                 (room.saturating_sub(1) / bound.max(1)).clamp(1, 3) as u8
             };
-            match Self::row(&t.spec, &mut job, planes, &mut slab, slots, &mut sink, &mut stats) {
-                Some(n) => done = done.saturating_add(n),
-                None => {
-                    left = false;
-                    break;
-                }
-            }
-            // Done as soon as the last row is: no empty call after it.
+            done = done.saturating_add(Self::row(
+                &t.spec, &mut job, planes, &mut slab, slots, &mut sink, &mut stats,
+            ));
+            // On to the next step with something to do; done as soon as
+            // the last row is: no empty call after it.
             if !Self::ahead(&t.spec, &sink.stride, &mut job) {
                 left = false;
                 break;
@@ -824,9 +823,9 @@ impl<'a> Stream<'a> {
         }
     }
 
-    /// Contour the next step of `job`, up to `planes` planes of its row,
-    /// and move past it; returns its cells, or `None` when it has none
-    /// left.
+    /// Contour the step `job` stands at (one with something to do, see
+    /// [`Job`]), up to `planes` planes of its row, and move past it;
+    /// returns its cells.
     fn row(
         spec: &VolumeSpec,
         job: &mut Job,
@@ -835,10 +834,7 @@ impl<'a> Stream<'a> {
         [s0, s1]: [&[u8]; 2],
         sink: &mut Keep<'_, '_, '_>,
         stats: &mut ContourStats,
-    ) -> Option<usize> {
-        if !Self::ahead(spec, &sink.stride, job) {
-            return None;
-        }
+    ) -> usize {
         let [nx, ny] = [usize::from(spec.dims[0]), usize::from(spec.dims[1])];
         let y = job.next as usize;
         let (cur, prev): (&[u8], &[u8]) = if job.slot == 0 { (s0, s1) } else { (s1, s0) };
@@ -850,7 +846,7 @@ impl<'a> Stream<'a> {
         let before = stats.cells;
         let _ = slab.row(&rows, [nx, ny], y, usize::from(job.lower), up, cut, sink, stats);
         job.past(end);
-        Some((stats.cells - before).max(1) as usize)
+        (stats.cells - before).max(1) as usize
     }
 }
 
