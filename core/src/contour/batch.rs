@@ -16,12 +16,12 @@
 //!
 //! [`contour_subgrid`]: super::contour_subgrid
 
-use super::ContourStats;
 use super::compiled;
-use super::pen::{Placed, Placement, along_in};
+use super::pen::{Placement, along_in};
 use super::subgrid::DirectionCode;
 use super::sweep::{BLOCK, Classes, Sweep, each_busy};
-use crate::command::{Command, CommandSink};
+use super::{ContourStats, draw_program};
+use crate::command::CommandSink;
 
 /// Whether the target has vectors: x86-64, AArch64, WebAssembly built
 /// with `simd128`; not the MCU.
@@ -198,25 +198,16 @@ impl Batch {
         sink: &mut S,
         stats: &mut ContourStats,
     ) -> Result<(), S::Error> {
-        let mut placed = Placed::new();
         let mut sent = 0u64;
-        let mut send = |c: Command<(f32, f32)>| {
+        let point =
+            |e: usize| match (self.px.get(e).and_then(|r| r.get(i)), self.py.get(e).and_then(|r| r.get(i))) {
+                (Some(&x), Some(&y)) => Some((x, y)),
+                _ => None,
+            };
+        draw_program(program, point, |c| {
             sent += 1;
             sink.command(0, c.map(|(x, y)| place(x, y)))
-        };
-        let mut steps = program.packed();
-        for _ in 0..program.len() {
-            let e = steps as usize & 7;
-            let (Some(x), Some(y)) =
-                (self.px.get(e).and_then(|r| r.get(i)), self.py.get(e).and_then(|r| r.get(i)))
-            else {
-                break;
-            };
-            let p = (*x, *y);
-            placed.step(if steps & 8 != 0 { Command::LineTo(p) } else { Command::MoveTo(p) }, &mut send)?;
-            steps >>= 4;
-        }
-        placed.finish(&mut send)?;
+        })?;
         stats.crossing_cells += u64::from(sent > 0);
         stats.commands += sent;
         Ok(())

@@ -154,10 +154,14 @@ pub fn contour_subgrid<P, S: CommandSink<P>>(
             && traversal == Traversal::Compiled
             && let Some(program) = compiled::program(code, below)
         {
-            draw_program(sub, at, level, program, |c| {
-                sent += 1;
-                sink.command(li, c.map(|(x, y)| place(x, y)))
-            })?;
+            draw_program(
+                program,
+                |e| Some(at.along(e, sub.crossing_inside(e, level))),
+                |c| {
+                    sent += 1;
+                    sink.command(li, c.map(|(x, y)| place(x, y)))
+                },
+            )?;
             continue;
         }
         let mut placed = Placed::new();
@@ -207,26 +211,25 @@ pub fn contour_subgrid<P, S: CommandSink<P>>(
     Ok(sent)
 }
 
-/// Draw the compiled traversal's `program` of `sub` (its key at `level`:
-/// every crossing inside an edge, no node at the level): its commands, in
-/// the cell's grid coordinates, to `send`. Each caller passes a closure
-/// of its own, so that each is inlined where it is called.
+/// Draw a compiled traversal's `program` (every crossing inside an edge,
+/// no node at the level): the point on each edge it names, `point(edge)`
+/// in the cell's grid coordinates (worked out there, or by a batch
+/// beforehand; `None` ends the drawing), tidied by [`Placed`] into
+/// commands to `send`. Each caller passes closures of its own, so that
+/// each is inlined where it is called.
 ///
 /// # Errors
 /// The error of `send`.
 #[inline(always)]
 pub(crate) fn draw_program<E>(
-    sub: &Subgrid,
-    at: Placement,
-    level: f32,
     program: compiled::Program,
+    point: impl Fn(usize) -> Option<(f32, f32)>,
     mut send: impl FnMut(Command<(f32, f32)>) -> Result<(), E>,
 ) -> Result<(), E> {
     let mut placed = Placed::new();
     let mut steps = program.packed();
     for _ in 0..program.len() {
-        let e = steps as usize & 7;
-        let p = at.along(e, sub.crossing_inside(e, level));
+        let Some(p) = point(steps as usize & 7) else { break };
         placed.step(if steps & 8 != 0 { Command::LineTo(p) } else { Command::MoveTo(p) }, &mut send)?;
         steps >>= 4;
     }

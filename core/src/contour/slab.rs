@@ -487,6 +487,7 @@ fn draw_yz<S: SurfaceSink>(
             (Some(&a), Some(&b), Some(&c), Some(&d)) => [a, b, c, d],
             _ => [0; 4],
         };
+        // The classes help at one level only: the loop is chosen once.
         if sweep.classed() {
             each_busy(m, ys, |k| match corners(k) {
                 Some(c) => {

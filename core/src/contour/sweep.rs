@@ -415,10 +415,14 @@ impl<'l> Sweep<'l> {
                 && let Some(program) = compiled::program(sub.code(), below)
             {
                 let mut sent = 0u32;
-                draw_program(&sub, at, level, program, |c| {
-                    sent += 1;
-                    sink.command(0, c.map(|(x, y)| place(x, y)))
-                })?;
+                draw_program(
+                    program,
+                    |e| Some(at.along(e, sub.crossing_inside(e, level))),
+                    |c| {
+                        sent += 1;
+                        sink.command(0, c.map(|(x, y)| place(x, y)))
+                    },
+                )?;
                 stats.crossing_cells += u64::from(sent > 0);
                 stats.commands += u64::from(sent);
                 return Ok(());
