@@ -478,7 +478,7 @@ fn draw_yz<S: SurfaceSink>(
             let to = &mut SliceSink { sink: &mut *sink, slice: slice(k) };
             match program {
                 Some(p) => batch.draw(i, p, &place(k), to, stats),
-                None => sweep.cell(corners, at, &place(k), to, stats),
+                None => sweep.cell_aside(corners, at, &place(k), to, stats),
             }
         })?;
     } else {

@@ -353,7 +353,7 @@ impl<'l> Sweep<'l> {
             batch.gather(m, cells, self.level(), |k| Some((corners(k)?, at(k))));
             return batch.each(|i, k, corners, program| match program {
                 Some(p) => batch.draw(i, p, &|x, y| place(k, x, y), sink, stats),
-                None => self.cell(corners, at(k), &|x, y| place(k, x, y), sink, stats),
+                None => self.cell_aside(corners, at(k), &|x, y| place(k, x, y), sink, stats),
             });
         }
         let classes = |k: usize| match (lo.get(k), lo.get(k + 1), up.get(k + 1), up.get(k)) {
@@ -428,6 +428,22 @@ impl<'l> Sweep<'l> {
                 return Ok(());
             }
         }
+        self.cell(corners, at, place, sink, stats)
+    }
+
+    /// [`Sweep::cell`] as a call: for the few cells the batch leaves
+    /// (a node at the level, a non-finite corner), so that the batch's
+    /// loop stays small.
+    #[inline(never)]
+    #[cold]
+    pub(crate) fn cell_aside<P, S: CommandSink<P>>(
+        &self,
+        corners: [f32; 4],
+        at: Placement,
+        place: &impl Fn(f32, f32) -> P,
+        sink: &mut S,
+        stats: &mut ContourStats,
+    ) -> Result<(), S::Error> {
         self.cell(corners, at, place, sink, stats)
     }
 
