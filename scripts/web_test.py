@@ -279,6 +279,19 @@ def check_large(b, sim, tmp):
     flags = ["--demo", LARGE_DEMO, "--yaw", str(v["yaw"]), "--pitch", str(v["pitch"]), "--margin",
              str((1 - v["zoom"]) / 2)]
     check_scene(b, f"{LARGE_DEMO} at the page's view", page_frame(b), flags, sim, tmp, "large")
+    # A new level on a volume this slow to build shows a draft first (a
+    # quarter of the slices), then the frame itself: render's.
+    b.eval("(() => { window.__shown = []; window.isoscope.onframe = (s) => window.__shown.push([s.draft, s.every]); "
+           "const l = document.getElementById('level'); l.value = '0.25'; l.dispatchEvent(new Event('input')); })()")
+    b.wait("window.__shown.length > 0 && !window.isoscope.pending()", f"{LARGE_DEMO} at level 0.25", timeout=120)
+    shown = b.eval("window.isoscope.onframe = null, window.__shown")
+    every = b.eval("window.isoscope.stats().every")
+    if not shown[0][0] or shown[0][1] != 4 * every or shown[-1] != [False, every]:
+        fail(f"{LARGE_DEMO}: a new level showed {shown} ([draft, every] a frame), not a draft at every "
+             f"{4 * every} and then the frame at every {every}")
+    print(f"web-test: {LARGE_DEMO} at level 0.25: a draft at a stride of {4 * every} slices first, then the frame "
+          f"at {every}")
+    check_scene(b, f"{LARGE_DEMO} at level 0.25", page_frame(b), flags + ["--level", "0.25"], sim, tmp, "large-level")
 
 
 def check_audio(b, base, sim, tmp):

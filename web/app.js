@@ -24,6 +24,11 @@ const SPIN_DEG_PER_S = 20;
 const PAINTERS_DEFAULT = Math.min(4, Math.max(1, (navigator.hardwareConcurrency || 2) - 2));
 // Work shown with its progress once it has run this long.
 const BUSY_AFTER_MS = 300;
+// A change of settings is first drawn as a draft (a quarter of the slices,
+// lib.rs's Scope::draft) when the last frame took this long to build, so
+// that a slider dragged across a large volume answers at once; the frame
+// itself follows when the settings rest.
+const DRAFT_AFTER_MS = 100;
 
 const view = { ...DEFAULT_VIEW };
 let levels = [];
@@ -36,6 +41,8 @@ let building = false;
 let loading = false;
 // Frames handed to the painter and not yet on the canvas.
 let painting = 0;
+// Milliseconds the last frame (not a draft) of this volume took to build.
+let lastBuildMs = 0;
 let spinning = false;
 // The mouse turns the view (a drag on the picture).
 let dragging = false;
@@ -223,9 +230,13 @@ async function redraw() {
   building = true;
   const t0 = performance.now();
   try {
-    const frame = await call('frame', { settings: settings() });
+    const frame = await call('frame', { settings: settings(), draft: lastBuildMs >= DRAFT_AFTER_MS });
     if (frame) show(frame, t0);
     else if (painting === 0) api.ready = true;
+    // After a draft the frame itself is owed (the next request builds it
+    // if the settings have not moved on meanwhile, else a new draft).
+    if (frame && frame.draft) dirty = true;
+    else if (frame) lastBuildMs = JSON.parse(frame.stats).build_ms;
     clearError();
   } catch (e) {
     showError(e);
@@ -254,7 +265,8 @@ function show(frame, t0) {
       api.frameMs = performance.now() - t0;
       api.frames += 1;
       api.ready = true;
-      audio.update();
+      // The sound is the frame's, not a draft's.
+      if (!frame.draft) audio.update();
       showStats();
       if (api.onframe) api.onframe(stats, api.frameMs);
     })
@@ -275,7 +287,8 @@ function showStats() {
   const lines = [
     `${fmt(s.points)} points, ${fmt(s.polylines)} polylines · ${fmt(s.samples)} samples (${lit}% lit)`,
     `blanked travel ${(100 * s.blank_ratio).toFixed(1)}% of lit · refresh ${s.fps.toFixed(1)} Hz at ${rate}`,
-    `${s.board === 'host' ? 'host memory' : `${s.board} board`} · every ${s.every} · ` +
+    `${s.draft ? 'a draft, the frame follows · ' : ''}` +
+      `${s.board === 'host' ? 'host memory' : `${s.board} board`} · every ${s.every} · ` +
       `built in ${s.build_ms.toFixed(0)} ms, drawn in ${(s.draw_ms + s.pixels_ms).toFixed(0)} ms, ` +
       `on the screen after ${api.frameMs.toFixed(0)} ms`,
     ...s.remarks,
@@ -342,6 +355,7 @@ function setLevels(ls) {
 // (else its default levels); the page keeps the old one if it fails.
 async function load(op, args, at = null) {
   loading = true;
+  lastBuildMs = 0;
   try {
     showVolume(await call(op, args));
     if (at) setLevels(at);

@@ -83,12 +83,14 @@ const ops = {
   },
   // Apply the page's settings; build the frame if they changed (null if
   // not): its samples for the painter, and whether it is drawn on a dark
-  // screen.
-  frame({ settings: s }) {
+  // screen. With `draft`, a draft of it first (lib.rs's Scope::draft)
+  // where one can be made and none is drawn yet: `draft` in the answer.
+  frame({ settings: s, draft = false }) {
     apply(s);
-    if (!scope.update()) return answer(null);
+    const drafted = draft && scope.draft();
+    if (!drafted && !scope.update()) return answer(null);
     const samples = scope.frame_samples();
-    return answer({ samples, clear: scope.clears(), stats: scope.stats() }, [samples.buffer]);
+    return answer({ samples, clear: scope.clears(), stats: scope.stats(), draft: drafted }, [samples.buffer]);
   },
   // The board link: greet a board (a new link), move the port's bytes and
   // the time through it (`bytes` read, or `closed`), send the page's

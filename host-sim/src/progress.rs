@@ -6,10 +6,16 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
-/// A function told of each unit finished: the label, the units done and
-/// the total. It is called on the thread that finished the unit, as often
-/// as units finish: it keeps its own pace.
+/// A function told of the work done: the label, the units done and the
+/// total. It is called on the thread that finished the units, when the
+/// count passes each of [`HOOK_STEPS`] even steps of the total and when it
+/// reaches the total (every unit when the total is smaller): at most a few
+/// hundred calls for any amount of work (the web app's worker crosses from
+/// WebAssembly to JavaScript for each, with its label as a new string).
 pub type Hook = fn(&'static str, usize, usize);
+
+/// Steps of the total at which a [`Hook`] is told.
+pub const HOOK_STEPS: usize = 256;
 
 /// A shared counter that redraws one status line at most ten times a second.
 #[derive(Debug)]
@@ -55,9 +61,14 @@ impl Progress {
 
     /// `n` more units finished.
     pub fn add(&self, n: usize) {
-        let done = self.done.fetch_add(n, Ordering::Relaxed).saturating_add(n);
+        let before = self.done.fetch_add(n, Ordering::Relaxed);
+        let done = before.saturating_add(n);
         if let Some(hook) = self.hook {
-            hook(self.label, done, self.total);
+            let step = (self.total / HOOK_STEPS).max(1);
+            let finished = done >= self.total && before < self.total;
+            if finished || done / step != before / step {
+                hook(self.label, done, self.total);
+            }
         }
         if !self.enabled || n == 0 {
             return;
@@ -129,11 +140,35 @@ mod tests {
     }
 
     #[test]
-    fn a_hook_is_told_each_unit() {
+    fn a_hook_is_told_each_unit_of_a_little_work() {
         let p = Progress::with_hook("work", 3, hook);
         p.inc();
         p.inc();
         assert_eq!(SEEN.load(Ordering::Relaxed), 2);
         assert_eq!(p.done(), 2);
+    }
+
+    static CALLS: AtomicUsize = AtomicUsize::new(0);
+    static LAST: AtomicUsize = AtomicUsize::new(0);
+
+    fn counted(_: &'static str, done: usize, total: usize) {
+        assert_eq!(total, 100_003);
+        assert!(done > LAST.swap(done, Ordering::Relaxed) || done <= total / HOOK_STEPS, "counts go on");
+        CALLS.fetch_add(1, Ordering::Relaxed);
+    }
+
+    #[test]
+    fn a_hook_is_told_of_much_work_in_steps_and_at_its_end() {
+        let p = Progress::with_hook("work", 100_003, counted);
+        (0..100_002).for_each(|_| p.inc());
+        let calls = CALLS.load(Ordering::Relaxed);
+        assert!((HOOK_STEPS - 1..=HOOK_STEPS).contains(&calls), "{calls} calls");
+        p.inc();
+        assert_eq!(LAST.load(Ordering::Relaxed), 100_003, "told of the last unit");
+        // Begun again: told again from the first step.
+        p.restart();
+        p.add(100_003 / HOOK_STEPS);
+        assert_eq!(LAST.load(Ordering::Relaxed), 100_003 / HOOK_STEPS);
+        assert_eq!(CALLS.load(Ordering::Relaxed), calls + 2);
     }
 }

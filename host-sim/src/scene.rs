@@ -769,10 +769,15 @@ mod tests {
     #[test]
     fn starting_at_the_size_another_level_needed_draws_the_same_frame() {
         use std::sync::atomic::{AtomicUsize, Ordering};
-        // Frames fed to the boards, restarts included.
+        // Frames fed to the boards, restarts included: the count told
+        // last, and the counts told last before each restart.
         static FED: AtomicUsize = AtomicUsize::new(0);
-        fn count(_: &'static str, _: usize, _: usize) {
-            FED.fetch_add(1, Ordering::Relaxed);
+        static LAST: AtomicUsize = AtomicUsize::new(0);
+        fn count(_: &'static str, done: usize, _: usize) {
+            let last = LAST.swap(done, Ordering::Relaxed);
+            if done < last {
+                FED.fetch_add(last, Ordering::Relaxed);
+            }
         }
         let vol =
             WireVolume::from_loaded(&LoadedVolume::demo("gyroid:32".parse().unwrap()).unwrap()).unwrap();
@@ -790,13 +795,14 @@ mod tests {
             let want = build(&vol, &cfg).unwrap();
             assert_eq!(want.capacity.points, needs, "level {level}");
             FED.store(0, Ordering::Relaxed);
+            LAST.store(0, Ordering::Relaxed);
             let progress = Progress::with_hook("contouring", frames(&cfg), count);
             let (board, capacity) = board_near(&vol, &cfg, started, Some(&progress)).unwrap();
             let got = scene_of(board.board(), &vol, capacity, &cfg);
             assert_eq!(got.capacity, want.capacity, "level {level} from {started}");
             assert_eq!(got.samples, want.samples, "level {level} from {started}");
             assert_eq!(got.commands, want.commands, "level {level} from {started}");
-            let fed = FED.load(Ordering::Relaxed);
+            let fed = FED.load(Ordering::Relaxed) + LAST.load(Ordering::Relaxed);
             assert_eq!(fed == frames(&cfg), once, "level {level} from {started}: {fed} frames fed");
         }
     }

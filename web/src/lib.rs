@@ -63,6 +63,11 @@ const DEFAULT_ZOOM: f64 = 0.9;
 /// The largest picture, in pixels a side.
 const MAX_SIZE: u32 = 2048;
 
+/// A draft's slice stride, in strides of its frame ([`Scope::draft`]):
+/// four: a quarter of the slices, about a fifth of the points of
+/// `gyroid:128`'s frame.
+const DRAFT_STRIDE: usize = 4;
+
 /// A loaded volume and what the page shows of it.
 struct Volume {
     /// Its name: the file's, or the demo's `NAME:N`.
@@ -93,6 +98,9 @@ pub struct Scope {
     board: Option<Board>,
     /// The frame of the settings, `None` when they changed since.
     scene: Option<Scene>,
+    /// A draft of the frame of the settings ([`Scope::draft`]), shown
+    /// until the frame is built; `None` when they changed since.
+    draft: Option<Scene>,
     /// The host memory, in points, the last frame's surface needed, and
     /// the settings it was for: a frame that differs only in its view
     /// starts there ([`scene::with_board_from`]).
@@ -215,7 +223,7 @@ impl Scope {
     pub fn set_levels(&mut self, levels: Vec<f32>) {
         if levels != self.levels {
             self.levels = levels;
-            self.scene = None;
+            self.stale();
         }
     }
 
@@ -226,7 +234,7 @@ impl Scope {
         let zoom = if zoom.is_finite() { zoom.clamp(0.1, 1.0) } else { DEFAULT_ZOOM };
         if (yaw, pitch, zoom) != (self.yaw, self.pitch, self.zoom) {
             (self.yaw, self.pitch, self.zoom) = (yaw, pitch, zoom);
-            self.scene = None;
+            self.stale();
         }
     }
 
@@ -238,7 +246,7 @@ impl Scope {
         let planes = planes(axes).map_err(js)?;
         if planes != self.planes {
             self.planes = planes;
-            self.scene = None;
+            self.stale();
         }
         Ok(())
     }
@@ -249,7 +257,7 @@ impl Scope {
         let every = every as usize;
         if every != self.every {
             self.every = every;
-            self.scene = None;
+            self.stale();
         }
     }
 
@@ -265,7 +273,7 @@ impl Scope {
         };
         if board != self.board {
             self.board = board;
-            self.scene = None;
+            self.stale();
         }
         Ok(())
     }
@@ -277,7 +285,7 @@ impl Scope {
     /// dark screen, as `render` draws one. Turning it off redraws.
     pub fn set_persistence(&mut self, on: bool) {
         if self.persistence && !on {
-            self.scene = None;
+            self.stale();
         }
         self.persistence = on;
     }
@@ -302,15 +310,16 @@ impl Scope {
         if on != self.turning {
             self.turning = on;
             if !on && self.turn.take().is_some() {
-                self.scene = None;
+                self.stale();
             }
         }
     }
 
     /// The frame's samples for a [`Painter`]: `x, y, beam` (1 lit, 0
-    /// blanked) a sample (empty before the first frame).
+    /// blanked) a sample (empty before the first frame); the draft's
+    /// while only a draft is built ([`Scope::draft`]).
     pub fn frame_samples(&self) -> Vec<u16> {
-        self.scene.as_ref().map_or_else(Vec::new, |s| {
+        self.scene.as_ref().or(self.draft.as_ref()).map_or_else(Vec::new, |s| {
             s.samples.iter().flat_map(|p| [p.x, p.y, u16::from(p.beam == Beam::On)]).collect()
         })
     }
@@ -333,6 +342,23 @@ impl Scope {
         }
         self.redraw().map_err(js)?;
         Ok(true)
+    }
+
+    /// Build a draft of the frame if the settings changed and no draft
+    /// of them is drawn yet; whether one was. A draft is the frame with
+    /// [`DRAFT_STRIDE`] times the slice stride (`render --every` that, in
+    /// about a quarter of the time), for a page to show while it builds
+    /// the frame itself with [`Scope::update`]: a level slider dragged
+    /// across a large volume then answers at once, and the frame follows
+    /// when the slider rests. None with the board preset (its fit depends
+    /// on the stride), while the view turns (its frames are turned on the
+    /// board, at once), or when no coarser stride keeps two slices of the
+    /// longest axis. Exports and sound wait for the frame.
+    ///
+    /// # Errors
+    /// As [`Scope::update`].
+    pub fn draft(&mut self) -> Result<bool, JsError> {
+        self.redraft().map_err(js)
     }
 
     /// The picture (a band's rows), RGBA pixels, row by row from the top.
@@ -438,8 +464,9 @@ impl Scope {
     /// `every`, `board`, `remarks` (what `render` says on stderr), and
     /// `build_ms`, `draw_ms`; `null` before the first frame.
     pub fn stats(&self) -> String {
-        let Some(sc) = &self.scene else { return "null".into() };
+        let Some(sc) = self.scene.as_ref().or(self.draft.as_ref()) else { return "null".into() };
         let mut o = Json::default();
+        o.raw("draft", if self.scene.is_none() { "true" } else { "false" });
         o.raw("points", &sc.points.to_string());
         o.raw("polylines", &sc.polylines.to_string());
         o.raw("samples", &sc.frame.samples.to_string());
@@ -506,6 +533,7 @@ impl Scope {
             zoom: DEFAULT_ZOOM,
             board: None,
             scene: None,
+            draft: None,
             fit: None,
             fitted: None,
             build_ms: 0.0,
@@ -573,7 +601,7 @@ impl Scope {
         self.levels.clone_from(&levels);
         self.volume =
             Some(Volume { name, loaded: vol.clone(), wire, summary, default_levels: levels, notes });
-        self.scene = None;
+        self.stale();
         self.fit = None;
         self.fitted = None;
         self.turn = None;
@@ -778,21 +806,57 @@ impl Scope {
             }
         };
         self.turn = turn;
+        self.fit = Some((self.fit_key(), built.capacity.points));
+        self.draw(&built, t0);
+        self.scene = Some(built);
+        self.draft = None;
+        Ok(())
+    }
+
+    /// [`Scope::draft`].
+    fn redraft(&mut self) -> Result<bool> {
+        if self.scene.is_some() || self.draft.is_some() || self.board.is_some() || self.turning {
+            return Ok(false);
+        }
+        let t0 = web_time::Instant::now();
+        let wire = self.wire()?;
+        let cfg = self.config(wire);
+        let longest = wire.dims.iter().copied().max().map_or(0, usize::from);
+        let every = cfg.every.saturating_mul(DRAFT_STRIDE).min(usize::from(u8::MAX));
+        if every <= cfg.every || longest < 2 * every {
+            return Ok(false);
+        }
+        let cfg = SceneConfig { every, ..cfg };
+        let progress =
+            Progress::with_hook("contouring a draft", frames_for(wire, &cfg.send()?), report_feeding);
+        let (board, capacity) = scene::board_from(wire, &cfg, scene::HOST_START_POINTS, Some(&progress))?;
+        let built = scene::scene_of(board.board(), wire, capacity, &cfg);
+        self.draw(&built, t0);
+        self.draft = Some(built);
+        Ok(true)
+    }
+
+    /// Draw `built` (begun at `t0`) on the scope's screen if it draws: on
+    /// a dark screen, as `render` draws it (one refresh), or over the last
+    /// one, faded, as `render --animate` draws its frames. Its times are
+    /// the frame's statistics.
+    fn draw(&mut self, built: &Scene, t0: web_time::Instant) {
         let t1 = web_time::Instant::now();
         report("drawing the picture", 0, 0);
-        // A frame on a dark screen, as `render` draws it (one refresh), or
-        // over the last one, faded, as `render --animate` draws its frames.
         if self.drawing {
             if !self.persistence {
                 self.screen.clear();
             }
-            scene::refresh(&mut self.screen, &built, 1, None);
+            scene::refresh(&mut self.screen, built, 1, None);
         }
         self.build_ms = (t1 - t0).as_secs_f64() * 1e3;
         self.draw_ms = t1.elapsed().as_secs_f64() * 1e3;
-        self.fit = Some((self.fit_key(), built.capacity.points));
-        self.scene = Some(built);
-        Ok(())
+    }
+
+    /// The settings changed: the frame and its draft are of the last.
+    fn stale(&mut self) {
+        self.scene = None;
+        self.draft = None;
     }
 }
 
@@ -1258,6 +1322,59 @@ mod tests {
             assert_eq!(s.scene.as_ref().unwrap().samples, want.samples, "level {level}");
             assert_eq!(s.fit.as_ref().unwrap().1, want.capacity.points, "level {level}");
         }
+    }
+
+    /// A draft is `render --every` four times the stride's frame, drawn
+    /// and handed out until the frame itself is built, which is the same
+    /// as without a draft; one a change of settings, none where it cannot
+    /// be coarser, on the board preset, or while the view turns.
+    #[test]
+    fn a_draft_is_renders_frame_at_four_times_the_stride() {
+        let vol =
+            WireVolume::from_loaded(&LoadedVolume::demo("gyroid:32".parse().unwrap()).unwrap()).unwrap();
+        let mut s = Scope::with_size(64).unwrap();
+        s.demo("gyroid:32").unwrap();
+        s.redraw().unwrap();
+        assert!(!s.draft().unwrap(), "the frame of these settings is drawn: no draft");
+        let plain = Scope::with_size(64).map(|mut p| {
+            p.demo("gyroid:32").unwrap();
+            p.set_every(2);
+            p.set_levels(vec![0.3]);
+            p.redraw().unwrap();
+            p
+        });
+        let plain = plain.unwrap();
+        s.set_every(2);
+        s.set_levels(vec![0.3]);
+        assert!(s.stats() == "null" && s.frame_samples().is_empty(), "nothing of the old settings");
+        assert!(s.draft().unwrap());
+        let cfg = SceneConfig { every: 8, ..s.config(s.wire().unwrap()) };
+        let want = scene::build(&vol, &cfg).unwrap();
+        let draft = s.draft.as_ref().unwrap();
+        assert_eq!(draft.samples, want.samples);
+        assert_eq!(s.frame_samples().len(), 3 * want.samples.len());
+        let drawn = scene::render(&want, PhosphorConfig::with_size(64, 64), 1, None).unwrap();
+        assert!(s.pixels() == drawn.to_rgba8(), "the draft is drawn as render draws it");
+        assert!(s.stats().contains("\"draft\":true") && s.stats().contains("\"every\":8"));
+        assert!(s.png_bytes().is_err() && s.samples_text().is_empty(), "no export of a draft");
+        assert!(!s.draft().unwrap(), "one draft a change");
+        // The frame, as without the draft.
+        assert!(s.update().unwrap());
+        assert!(s.draft.is_none() && s.stats().contains("\"draft\":false"));
+        assert_eq!(s.scene.as_ref().unwrap().samples, plain.scene.as_ref().unwrap().samples);
+        assert_eq!(s.fit, plain.fit);
+        assert!(s.pixels() == plain.pixels());
+        // No stride four times as coarse keeps two slices of 32.
+        s.set_every(5);
+        assert!(!s.draft().unwrap());
+        s.set_every(0);
+        s.set_board("f407").unwrap();
+        assert!(!s.draft().unwrap(), "the board preset fits the volume to the stride");
+        s.set_board("").unwrap();
+        s.set_turning(true);
+        assert!(!s.draft().unwrap(), "a turn's frames come from the board, at once");
+        s.set_turning(false);
+        assert!(s.draft().unwrap());
     }
 
     /// While the view turns, a frame is the board's picture turned with
