@@ -458,7 +458,8 @@ impl Scope {
         o.end()
     }
 
-    /// The last frame as JSON: `points`, `polylines`, `samples`,
+    /// The last frame as JSON: `draft` (whether it is only a draft,
+    /// [`Scope::draft`]), `points`, `polylines`, `samples`,
     /// `lit_samples`, `blank_ratio` (blanked travel over lit length),
     /// `fps` (refreshes a second at the sample rate), `sample_rate_hz`,
     /// `every`, `board`, `remarks` (what `render` says on stderr), and
