@@ -136,7 +136,11 @@ impl Sweep<'_> {
     /// row classes up to six rows in as many places, and inlined each copy
     /// held the levels' bounds in registers that the whole row, called
     /// once a row of the volume, then spilled and set up on every call.
+    /// In WebAssembly it is built with SIMD (`simd128`), as the page's
+    /// painter is, though the module as a whole is not (docs/web.md): the
+    /// classes are integer operations alone, four samples a step.
     #[inline(never)]
+    #[cfg_attr(target_arch = "wasm32", target_feature(enable = "simd128"))]
     pub(crate) fn classify(&self, row: &[f32], out: &mut Classes) {
         let (above, below) = (self.above, self.below);
         let class = |v: f32| {
