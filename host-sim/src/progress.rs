@@ -63,9 +63,10 @@ impl Progress {
     pub fn add(&self, n: usize) {
         let before = self.done.fetch_add(n, Ordering::Relaxed);
         let done = before.saturating_add(n);
+        // This call took the count to the total.
+        let finished = done >= self.total && before < self.total;
         if let Some(hook) = self.hook {
             let step = (self.total / HOOK_STEPS).max(1);
-            let finished = done >= self.total && before < self.total;
             if finished || done / step != before / step {
                 hook(self.label, done, self.total);
             }
@@ -75,7 +76,6 @@ impl Progress {
         }
         let Ok(mut last) = self.last.lock() else { return };
         let now = Instant::now();
-        let finished = done >= self.total && done - n < self.total;
         if finished || last.is_none_or(|t| now - t >= Duration::from_millis(100)) {
             *last = Some(now);
             let _ = write!(std::io::stderr(), "\r{}", status(self.label, done, self.total));
