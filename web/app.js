@@ -231,12 +231,14 @@ async function redraw() {
   const t0 = performance.now();
   try {
     const frame = await call('frame', { settings: settings(), draft: lastBuildMs >= DRAFT_AFTER_MS });
-    if (frame) show(frame, t0);
-    else if (painting === 0) api.ready = true;
-    // After a draft the frame itself is owed (the next request builds it
-    // if the settings have not moved on meanwhile, else a new draft).
-    if (frame && frame.draft) dirty = true;
-    else if (frame) lastBuildMs = JSON.parse(frame.stats).build_ms;
+    if (frame) {
+      const built = JSON.parse(frame.stats);
+      show(frame, built, t0);
+      // After a draft the frame itself is owed (the next request builds
+      // it if the settings have not moved on meanwhile, else a new draft).
+      if (frame.draft) dirty = true;
+      else lastBuildMs = built.build_ms;
+    } else if (painting === 0) api.ready = true;
     clearError();
   } catch (e) {
     showError(e);
@@ -248,9 +250,9 @@ async function redraw() {
   if (dirty && !document.hidden) redraw();
 }
 
-// Hand a built frame to the painter; its picture onto the canvas when
-// drawn (frames are drawn in the order built).
-function show(frame, t0) {
+// Hand a built frame (its stats parsed: `built`) to the painter; its
+// picture onto the canvas when drawn (frames are drawn in the order built).
+function show(frame, built, t0) {
   painting += 1;
   paint(frame.samples, frame.clear)
     .then((parts) => {
@@ -261,7 +263,7 @@ function show(frame, t0) {
         if (rows > 0) screen.putImageData(new ImageData(rgba, p.size, rows), 0, p.first);
       }
       const slowest = (key) => Math.max(...parts.map((p) => p[key]));
-      stats = { ...JSON.parse(frame.stats), draw_ms: slowest('drawMs'), pixels_ms: slowest('pixelsMs') };
+      stats = { ...built, draw_ms: slowest('drawMs'), pixels_ms: slowest('pixelsMs') };
       api.frameMs = performance.now() - t0;
       api.frames += 1;
       api.ready = true;

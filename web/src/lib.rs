@@ -190,6 +190,12 @@ fn report_feeding(label: &'static str, done: usize, total: usize) {
     }
 }
 
+/// Progress, `label`, over the frames of `wire` that `cfg` feeds the
+/// engine, told to the page ([`report_feeding`]).
+fn feeding(label: &'static str, wire: &WireVolume, cfg: &SceneConfig) -> Result<Progress> {
+    Ok(Progress::with_hook(label, frames_for(wire, &cfg.send()?), report_feeding))
+}
+
 #[wasm_bindgen]
 impl Scope {
     /// A scope drawing a `size` by `size` picture, showing nothing yet.
@@ -319,7 +325,7 @@ impl Scope {
     /// blanked) a sample (empty before the first frame); the draft's
     /// while only a draft is built ([`Scope::draft`]).
     pub fn frame_samples(&self) -> Vec<u16> {
-        self.scene.as_ref().or(self.draft.as_ref()).map_or_else(Vec::new, |s| {
+        self.picture().map_or_else(Vec::new, |s| {
             s.samples.iter().flat_map(|p| [p.x, p.y, u16::from(p.beam == Beam::On)]).collect()
         })
     }
@@ -465,7 +471,7 @@ impl Scope {
     /// `every`, `board`, `remarks` (what `render` says on stderr), and
     /// `build_ms`, `draw_ms`; `null` before the first frame.
     pub fn stats(&self) -> String {
-        let Some(sc) = self.scene.as_ref().or(self.draft.as_ref()) else { return "null".into() };
+        let Some(sc) = self.picture() else { return "null".into() };
         let mut o = Json::default();
         o.raw("draft", if self.scene.is_none() { "true" } else { "false" });
         o.raw("points", &sc.points.to_string());
@@ -683,7 +689,7 @@ impl Scope {
     /// view turns, the board it was built on comes with it, to turn
     /// ([`Scope::set_turning`]).
     fn build(&self, wire: &WireVolume, cfg: &SceneConfig) -> Result<(Scene, Option<Turn>)> {
-        let progress = Progress::with_hook("contouring", frames_for(wire, &cfg.send()?), report_feeding);
+        let progress = feeding("contouring", wire, cfg)?;
         let (board, capacity) = match &self.fit {
             Some((fit, points)) if *fit == self.fit_key() => {
                 scene::board_from(wire, cfg, *points, Some(&progress))?
@@ -747,6 +753,11 @@ impl Scope {
 
     fn fit_key(&self) -> Fit {
         Fit { levels: self.levels.clone(), planes: self.planes.clone(), every: self.every, board: self.board }
+    }
+
+    /// What the page shows of the settings: the frame, else its draft.
+    fn picture(&self) -> Option<&Scene> {
+        self.scene.as_ref().or(self.draft.as_ref())
     }
 
     /// The frame on the screen, if it is of the settings.
@@ -828,8 +839,7 @@ impl Scope {
             return Ok(false);
         }
         let cfg = SceneConfig { every, ..cfg };
-        let progress =
-            Progress::with_hook("contouring a draft", frames_for(wire, &cfg.send()?), report_feeding);
+        let progress = feeding("contouring a draft", wire, &cfg)?;
         let (board, capacity) = scene::board_from(wire, &cfg, scene::HOST_START_POINTS, Some(&progress))?;
         let built = scene::scene_of(board.board(), wire, capacity, &cfg);
         self.draw(&built, t0);
